@@ -1,0 +1,37 @@
+# Two entry points for a fresh machine: `make demo` (main job) and `make test` (the CI suite).
+# Both create .venv and install the package with the pins in constraints.txt.
+PYTHON ?= python3
+VENV ?= .venv
+BIN := $(VENV)/bin
+PIP := $(BIN)/python -m pip
+EXTRAS ?= robosuite,ray,notebooks,dev
+STAMP := $(VENV)/.installed
+PYTEST_ARGS ?= -m "not slow and not gpu"
+
+.PHONY: install demo test test-all bench clean
+
+$(STAMP): pyproject.toml constraints.txt
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(PIP) install -q --upgrade pip
+	$(PIP) install -q -c constraints.txt -e ".[$(EXTRAS)]"
+	touch $@
+
+install: $(STAMP)
+
+# Main job: train HUBS-GO on KeyDoor with the default budget and print the learned sub-goal sets (G*).
+demo: $(STAMP)
+	$(BIN)/hubsgo train keydoor --agent hubsgo --seed 0 --out runs/demo-keydoor
+	$(BIN)/hubsgo subgoals runs/demo-keydoor
+
+# The CI suite: every part (critic, MiniGrid, robosuite, CLI, notebooks), slow/gpu tests excluded.
+test: $(STAMP)
+	$(BIN)/python -m pytest $(PYTEST_ARGS)
+
+test-all: $(STAMP)
+	$(BIN)/python -m pytest -m "not gpu"
+
+bench: $(STAMP)
+	$(BIN)/python benchmarks/critic.py
+
+clean:
+	rm -rf $(VENV) build *.egg-info

@@ -1,0 +1,61 @@
+"""Replay buffers: fixed-size numpy ring buffers with an explicit generator and a state_dict for resume."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch
+
+__all__ = ["ReplayBuffer"]
+
+
+class ReplayBuffer:
+    """A ring buffer of named fields, e.g. ``ReplayBuffer(10_000, obs=(8,), action=(), reward=())``.
+
+    ``sample`` draws uniformly with the buffer's own ``np.random.Generator`` and returns float32/int64
+    torch tensors.
+    """
+
+    def __init__(self, capacity: int, rng: np.random.Generator, dtypes: dict[str, Any] | None = None,
+                 **shapes: tuple[int, ...]):
+        if capacity <= 0:
+            raise ValueError(f"replay capacity must be positive, got {capacity}")
+        self.capacity = int(capacity)
+        self.rng = rng
+        dtypes = dtypes or {}
+        self.data = {k: np.zeros((self.capacity, *shape), dtype=dtypes.get(k, np.float32))
+                     for k, shape in shapes.items()}
+        self.pos = 0
+        self.size = 0
+
+    def __len__(self) -> int:
+        return self.size
+
+    def add(self, **values: Any) -> None:
+        missing = set(self.data) - set(values)
+        if missing:
+            raise KeyError(f"replay add() is missing fields {sorted(missing)}")
+        for k, arr in self.data.items():
+            arr[self.pos] = values[k]
+        self.pos = (self.pos + 1) % self.capacity
+        self.size = min(self.size + 1, self.capacity)
+
+    def sample(self, batch_size: int) -> dict[str, torch.Tensor]:
+        idx = self.rng.integers(0, self.size, size=batch_size)
+        out = {}
+        for k, arr in self.data.items():
+            t = torch.from_numpy(arr[idx])
+            out[k] = t.long() if np.issubdtype(arr.dtype, np.integer) else t.float()
+        return out
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"data": {k: v[: self.capacity].copy() for k, v in self.data.items()},
+                "pos": self.pos, "size": self.size}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        for k, v in state["data"].items():
+            if k not in self.data or self.data[k].shape != v.shape:
+                raise ValueError(f"replay field {k!r} does not match this buffer's layout")
+            self.data[k][...] = v
+        self.pos, self.size = int(state["pos"]), int(state["size"])

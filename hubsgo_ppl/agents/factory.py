@@ -1,0 +1,100 @@
+"""Builds an agent by name. Hierarchical agents differ only in their filter (and low level):
+
+- ``hubsgo``: the HRL loop + :class:`CriticFilter` around a :class:`SubgoalCritic` built from a model spec;
+- ``hdqn``:   the same loop and sub-goals with :class:`NoFilter` (no critic).
+
+Flat baselines and HIRO register their builders in :data:`BUILDERS` from their own modules.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Callable
+
+import gymnasium as gym
+import numpy as np
+import torch
+
+from .filters import CriticFilter, NoFilter
+from .high_level import HighLevelConfig, HighLevelDQN
+from .loop import HRLLoop, LoopConfig
+from .low_level import GoalDQN, GoalDQNConfig, ScriptedLowLevel
+
+__all__ = ["BUILDERS", "build_agent", "agent_names", "HIERARCHICAL"]
+
+HIERARCHICAL = ("hubsgo", "hdqn")
+
+
+def _dc(cls, values: dict[str, Any], section: str):
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = set(values) - names
+    if unknown:
+        raise ValueError(f"unknown {section} setting(s) {sorted(unknown)}; known: {sorted(names)}")
+    values = {k: tuple(v) if isinstance(v, list) else v for k, v in values.items()}
+    return cls(**values)
+
+
+def _low_level(kind: str, env: gym.Env, n_goals: int, low_cfg: dict, gen: torch.Generator,
+               rng: np.random.Generator):
+    obs_dim = int(np.prod(env.observation_space.shape))
+    if kind == "learned" and isinstance(env.action_space, gym.spaces.Discrete):
+        return GoalDQN(obs_dim, n_goals, int(env.action_space.n), _dc(GoalDQNConfig, low_cfg, "low"), gen, rng)
+    if kind == "scripted":
+        from .scripted_osc import ScriptedOSC
+
+        return ScriptedLowLevel(ScriptedOSC(**low_cfg))
+    if kind == "learned":
+        from .td3_her import GoalTD3
+
+        return GoalTD3.for_env(env, low_cfg, gen, rng)
+    raise ValueError(f"unknown low level {kind!r}; use 'learned' or 'scripted'")
+
+
+def build_hierarchical(agent: str, env: gym.Env, cfg: dict[str, Any], seed: int, critic: Any = None) -> HRLLoop:
+    names = list(env.unwrapped.subgoal_names)
+    n = len(names)
+    gen = torch.Generator().manual_seed(int(np.random.SeedSequence([seed, 1]).generate_state(1)[0]))
+    high_rng = np.random.default_rng(np.random.SeedSequence([seed, 2]))
+    low_rng = np.random.default_rng(np.random.SeedSequence([seed, 3]))
+    obs_dim = int(np.prod(env.observation_space.shape))
+    loop_cfg = _dc(LoopConfig, {**cfg.get("loop", {}), "total_steps": int(cfg["steps"])}, "loop")
+    high = HighLevelDQN(obs_dim, n, _dc(HighLevelConfig, cfg.get("high", {}), "high"), gen, high_rng)
+    low = _low_level(cfg.get("low_level", "learned"), env, n, cfg.get("low", {}), gen, low_rng)
+    if agent == "hubsgo":
+        if critic is None:
+            raise ValueError("the hubsgo agent needs a critic (built from a model spec)")
+        filt = CriticFilter(critic)
+    elif agent == "hdqn":
+        filt = NoFilter()
+    else:
+        raise ValueError(f"{agent!r} is not a hierarchical agent")
+    return HRLLoop(env, high, low, filt, loop_cfg, seed)
+
+
+# name -> builder(env, cfg, seed, critic=None). Strings are imported on first use, so a baseline's
+# dependencies load only when that baseline runs.
+BUILDERS: dict[str, Callable[..., Any] | str] = {
+    "hubsgo": lambda env, cfg, seed, critic=None: build_hierarchical("hubsgo", env, cfg, seed, critic),
+    "hdqn": lambda env, cfg, seed, critic=None: build_hierarchical("hdqn", env, cfg, seed, critic),
+    "ddqn": "hubsgo_ppl.agents.flat:build_ddqn",
+    "dqn": "hubsgo_ppl.agents.flat:build_dqn",
+    "ppo": "hubsgo_ppl.agents.flat:build_ppo",
+    "td3": "hubsgo_ppl.agents.flat:build_td3",
+    "hiro": "hubsgo_ppl.agents.hiro:build_hiro",
+}
+
+
+def agent_names() -> list[str]:
+    return sorted(BUILDERS)
+
+
+def build_agent(agent: str, env: gym.Env, cfg: dict[str, Any], seed: int, critic: Any = None) -> Any:
+    if agent not in BUILDERS:
+        raise ValueError(f"unknown agent {agent!r}; use one of: {', '.join(sorted(BUILDERS))}")
+    builder = BUILDERS[agent]
+    if isinstance(builder, str):
+        import importlib
+
+        module, func = builder.split(":")
+        builder = getattr(importlib.import_module(module), func)
+    return builder(env, cfg, seed, critic=critic)

@@ -1,0 +1,147 @@
+"""The high level: a DQN Q(s, g; θ) over the candidate sub-goals (Sec. 3.2).
+
+Its TD target takes the max over an allowed set, Eq. 2:
+``y = r + γ^k max_{g' ∈ M} Q(s', g'; θ⁻)`` with M = (Ĝt for HUBS-GO, G0 for h-DQN) ∩ not-yet-achieved.
+The same minibatch, as a :class:`HighLevelBatch`, feeds the critic's update (Algorithm 1, lines 9-11).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+
+from .buffers import ReplayBuffer
+from .nets import mlp
+
+__all__ = ["HighLevelConfig", "HighLevelBatch", "HighLevelDQN", "masked_max"]
+
+
+@dataclass
+class HighLevelConfig:
+    hidden: tuple[int, ...] = (128, 128)
+    lr: float = 1e-3
+    gamma: float = 0.99            # per primitive step; an option of k steps discounts by γ^k (SMDP)
+    batch_size: int = 64
+    buffer_size: int = 20_000
+    learning_starts: int = 64      # high-level transitions before updates start
+    target_tau: float = 0.02       # Polyak rate of the target network
+    double_q: bool = True
+    grad_clip: float = 10.0
+
+
+def masked_max(values: torch.Tensor, mask: torch.Tensor, empty: float = 0.0) -> torch.Tensor:
+    """max over the last dim where ``mask``; ``empty`` where the mask is all False. Torch ops only."""
+    neg = torch.finfo(values.dtype).min
+    m = torch.where(mask, values, torch.full_like(values, neg)).max(dim=-1).values
+    return torch.where(mask.any(dim=-1), m, torch.full_like(m, empty))
+
+
+@dataclass
+class HighLevelBatch:
+    """A high-level minibatch with the quantities the critic's residuals need (Eq. 2)."""
+
+    q_taken: torch.Tensor      # (B,) Q(s, g), detached
+    q_next: torch.Tensor       # (B, N) Q_target(s', ·), detached
+    reward: torch.Tensor       # (B,)
+    discount: torch.Tensor     # (B,) γ^k · (1 − terminated)
+    available: torch.Tensor    # (B, N) bool: sub-goals selectable at s'
+    extras: dict[str, Any] = field(default_factory=dict)
+
+    def residuals(self, w: torch.Tensor) -> torch.Tensor:
+        """y_Ĝ(w) − Q(s, g) for indicator configurations ``w`` (..., N) → (..., B).
+
+        Filtering is a tensor mask (never Python control flow on ``w``), so TraceGraph_ELBO keeps the
+        dependence of the likelihood on w. An empty allowed set bootstraps 0.
+        """
+        mask = (w.unsqueeze(-2) > 0.5) & self.available            # (..., B, N)
+        y = self.reward + self.discount * masked_max(self.q_next, mask)
+        return y - self.q_taken
+
+
+class HighLevelDQN:
+    """Q(s, g) learner with ε-greedy selection restricted to an allowed set."""
+
+    def __init__(self, obs_dim: int, n_goals: int, config: HighLevelConfig,
+                 generator: torch.Generator, rng: np.random.Generator):
+        self.cfg = config
+        self.n_goals = n_goals
+        self.rng = rng
+        self.q = mlp(obs_dim, config.hidden, n_goals, generator)
+        self.q_target = mlp(obs_dim, config.hidden, n_goals, generator)
+        self.q_target.load_state_dict(self.q.state_dict())
+        self.opt = torch.optim.Adam(self.q.parameters(), lr=config.lr)
+        self.buffer = ReplayBuffer(config.buffer_size, rng, dtypes={"goal": np.int64, "available": bool},
+                                   obs=(obs_dim,), goal=(), reward=(), next_obs=(obs_dim,),
+                                   discount=(), available=(n_goals,))
+        self.updates = 0
+
+    @torch.no_grad()
+    def q_values(self, obs: np.ndarray) -> np.ndarray:
+        return self.q(torch.as_tensor(obs, dtype=torch.float32)).numpy()
+
+    def select(self, obs: np.ndarray, allowed: np.ndarray, explore_eps: float) -> int:
+        """ε-greedy over ``allowed`` (Sec. 3.4: g_t = argmax_{g' ∈ Ĝt | G0} Q(s_t, g'))."""
+        choices = np.flatnonzero(allowed)
+        if choices.size == 0:
+            raise ValueError("the high level was given an empty allowed set")
+        if self.rng.random() < explore_eps:
+            return int(self.rng.choice(choices))
+        q = self.q_values(obs)
+        return int(choices[np.argmax(q[choices])])
+
+    def store(self, obs, goal, reward, next_obs, discount, available) -> None:
+        self.buffer.add(obs=obs, goal=goal, reward=reward, next_obs=next_obs, discount=discount,
+                        available=available)
+
+    def ready(self) -> bool:
+        return len(self.buffer) >= max(self.cfg.learning_starts, self.cfg.batch_size)
+
+    def update(self, target_mask: torch.Tensor | None) -> tuple[dict[str, float], HighLevelBatch]:
+        """One TD step with targets over ``available ∩ target_mask`` (Eq. 2); returns stats and the batch."""
+        b = self.buffer.sample(self.cfg.batch_size)
+        avail = b["available"].bool()
+        with torch.no_grad():
+            q_next_t = self.q_target(b["next_obs"])
+            mask = avail if target_mask is None else avail & target_mask.bool()
+            mask = torch.where(mask.any(-1, keepdim=True), mask, avail)   # empty Ĝt ∩ avail: fall back to G0
+            if self.cfg.double_q:
+                q_next_online = self.q(b["next_obs"])
+                neg = torch.finfo(q_next_online.dtype).min
+                a_star = torch.where(mask, q_next_online, torch.full_like(q_next_online, neg)).argmax(-1)
+                boot = q_next_t.gather(1, a_star[:, None]).squeeze(1)
+                boot = torch.where(mask.any(-1), boot, torch.zeros_like(boot))
+            else:
+                boot = masked_max(q_next_t, mask)
+            y = b["reward"] + b["discount"] * boot
+        q_taken = self.q(b["obs"]).gather(1, b["goal"][:, None]).squeeze(1)
+        loss = 0.5 * (y - q_taken).pow(2).mean()            # Eq. 2
+        self.opt.zero_grad()
+        loss.backward()
+        nn.utils.clip_grad_norm_(self.q.parameters(), self.cfg.grad_clip)
+        self.opt.step()
+        self._soft_update()
+        self.updates += 1
+        batch = HighLevelBatch(q_taken=q_taken.detach(), q_next=q_next_t, reward=b["reward"],
+                               discount=b["discount"], available=avail)
+        return {"high/td_loss": float(loss)}, batch
+
+    @torch.no_grad()
+    def _soft_update(self) -> None:
+        tau = self.cfg.target_tau
+        for p, pt in zip(self.q.parameters(), self.q_target.parameters()):
+            pt.mul_(1 - tau).add_(p, alpha=tau)
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"q": self.q.state_dict(), "q_target": self.q_target.state_dict(),
+                "opt": self.opt.state_dict(), "buffer": self.buffer.state_dict(), "updates": self.updates}
+
+    def load_state_dict(self, s: dict[str, Any]) -> None:
+        self.q.load_state_dict(s["q"])
+        self.q_target.load_state_dict(s["q_target"])
+        self.opt.load_state_dict(s["opt"])
+        self.buffer.load_state_dict(s["buffer"])
+        self.updates = int(s["updates"])

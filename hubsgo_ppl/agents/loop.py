@@ -1,0 +1,194 @@
+"""The one HRL loop (Algorithm 1), shared by every hierarchical agent (HUBS-GO, h-DQN).
+
+Each high-level iteration:
+
+1. the filter offers Ĝt; with probability ε_filter (rising over training, Sec. 3.4) the high level
+   chooses from Ĝt, otherwise from G0 — in both cases only among sub-goals not yet achieved;
+2. the high level picks g = argmax Q(s, g') over that set (ε-greedy while training);
+3. the low level acts until g is achieved, the env ends, or ``option_steps`` pass (lines 3-8);
+4. the transition (s, g, R, s', γ^k) goes to the high-level replay; the high level takes a TD step with
+   targets over Ĝt (Eq. 2), and the same minibatch drives the filter's update (lines 9-11).
+
+The loop is the only place where an environment and the critic meet. It does no IO: it returns
+per-episode statistics and leaves logging, progress bars and checkpoints to ``experiments.run``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+
+from .filters import SubgoalFilter
+from .high_level import HighLevelDQN
+from .schedules import LinearSchedule
+
+__all__ = ["LoopConfig", "EpisodeStats", "HRLLoop", "episode_seed"]
+
+
+@dataclass
+class LoopConfig:
+    total_steps: int = 100_000
+    option_steps: int = 40                      # N: low-level steps per high-level decision
+    gamma: float = 0.99                         # per primitive step (the high level discounts by γ^k)
+    explore_start: float = 1.0                  # high-level ε-greedy exploration (decays)
+    explore_end: float = 0.05
+    explore_fraction: float = 0.3
+    low_explore_start: float = 1.0              # low-level ε-greedy exploration (decays)
+    low_explore_end: float = 0.05
+    low_explore_fraction: float = 0.3
+    filter_start: float = 0.0                   # Sec. 3.4: probability of choosing from Ĝt (rises)
+    filter_end: float = 1.0
+    filter_fraction: float = 0.5
+    eval_filter: float = 1.0                    # greedy evaluation chooses from Ĝt with this probability
+
+
+@dataclass
+class EpisodeStats:
+    episode: int
+    env_steps: int                  # cumulative, after this episode
+    ret: float
+    length: int
+    success: bool
+    options: int
+    explore_eps: float
+    filter_eps: float
+    chosen: list[str] = field(default_factory=list)
+    scalars: dict[str, float] = field(default_factory=dict)   # means of update diagnostics
+
+    def row(self) -> dict[str, Any]:
+        d = asdict(self)
+        d.pop("chosen")
+        d.pop("scalars")
+        d["return"] = d.pop("ret")
+        d["success"] = int(self.success)
+        d.update(self.scalars)
+        return d
+
+
+def episode_seed(seed: int, episode: int) -> int:
+    """The env seed of episode ``episode`` of a run seeded ``seed`` (so resumed runs replay exactly)."""
+    return int(np.random.SeedSequence([seed, episode]).generate_state(1)[0])
+
+
+class HRLLoop:
+    def __init__(self, env: gym.Env, high: HighLevelDQN, low: Any, subgoal_filter: SubgoalFilter,
+                 config: LoopConfig, seed: int):
+        self.env = env
+        self.high, self.low, self.filter = high, low, subgoal_filter
+        self.cfg = config
+        self.seed = seed
+        self.rng = np.random.default_rng(np.random.SeedSequence([seed, 7]))
+        self.names: list[str] = list(env.unwrapped.subgoal_names)
+        self.env_steps = 0
+        self.episodes = 0
+        self._explore = LinearSchedule(config.explore_start, config.explore_end, config.explore_fraction)
+        self._low_explore = LinearSchedule(config.low_explore_start, config.low_explore_end,
+                                           config.low_explore_fraction)
+        self._filter = LinearSchedule(config.filter_start, config.filter_end, config.filter_fraction)
+
+    # -- one episode ---------------------------------------------------------------------------------
+    def progress(self) -> float:
+        return self.env_steps / max(self.cfg.total_steps, 1)
+
+    def _allowed(self, achieved: np.ndarray, filter_eps: float) -> np.ndarray:
+        base = ~achieved if (~achieved).any() else np.ones_like(achieved)
+        ghat = self.filter.allowed()
+        if ghat is not None and self.rng.random() < filter_eps:
+            restricted = base & ghat
+            if restricted.any():
+                return restricted
+        return base
+
+    def run_episode(self, train: bool = True, seed: int | None = None) -> EpisodeStats:
+        """Run one episode (Algorithm 1). ``train=False`` is greedy evaluation: no exploration, no updates."""
+        env, cfg = self.env, self.cfg
+        ep = self.episodes
+        obs, info = env.reset(seed=episode_seed(self.seed, ep) if seed is None else seed)
+        achieved = np.asarray(info["subgoals"], dtype=bool)
+        ret, length, options, success = 0.0, 0, 0, False
+        chosen: list[str] = []
+        sums: dict[str, float] = {}
+        counts: dict[str, int] = {}
+
+        def record(d: dict[str, float] | None) -> None:
+            for k, v in (d or {}).items():
+                sums[k] = sums.get(k, 0.0) + v
+                counts[k] = counts.get(k, 0) + 1
+
+        explore = self._explore(self.progress()) if train else 0.0
+        low_explore = self._low_explore(self.progress()) if train else 0.0
+        filter_eps = self._filter(self.progress()) if train else cfg.eval_filter
+        done = False
+        while not done:
+            if train:
+                explore = self._explore(self.progress())
+                low_explore = self._low_explore(self.progress())
+                filter_eps = self._filter(self.progress())
+            allowed = self._allowed(achieved, filter_eps)
+            g = self.high.select(obs, allowed, explore)
+            chosen.append(self.names[g])
+            if hasattr(self.low, "begin_option"):
+                self.low.begin_option()
+            s0, R, k = obs, 0.0, 0
+            terminated = truncated = False
+            while k < cfg.option_steps:
+                action = self.low.act(obs, g, low_explore, env)
+                next_obs, reward, terminated, truncated, info = env.step(action)
+                next_achieved = np.asarray(info["subgoals"], dtype=bool)
+                if train and self.low.learns:
+                    record(self.low.observe(obs, action, next_obs, achieved, next_achieved, terminated))
+                R += (cfg.gamma ** k) * float(reward)
+                ret += float(reward)
+                k += 1
+                length += 1
+                if train:
+                    self.env_steps += 1
+                obs, achieved = next_obs, next_achieved
+                if terminated or truncated or achieved[g]:
+                    break
+            options += 1
+            success = success or bool(info.get("is_success", False))
+            done = terminated or truncated
+            if train:
+                available = ~achieved if (~achieved).any() else np.ones_like(achieved)
+                discount = 0.0 if terminated else cfg.gamma ** k
+                self.high.store(s0, g, R, obs, discount, available)
+                if self.high.ready():
+                    ghat = self.filter.allowed()
+                    target = None if ghat is None else torch.as_tensor(ghat)
+                    stats, batch = self.high.update(target)
+                    record(stats)
+                    record(self.filter.update(batch))
+        if train:
+            self.episodes += 1
+        return EpisodeStats(episode=ep, env_steps=self.env_steps, ret=ret, length=length, success=success,
+                            options=options, explore_eps=explore, filter_eps=filter_eps, chosen=chosen,
+                            scalars={k: sums[k] / counts[k] for k in sums})
+
+    def train_chunk(self) -> list[EpisodeStats]:
+        """The trainer protocol used by ``experiments.run``: one training episode per call."""
+        return [self.run_episode(train=True)]
+
+    # -- checkpointing -------------------------------------------------------------------------------
+    def state_dict(self) -> dict[str, Any]:
+        s = {"env_steps": self.env_steps, "episodes": self.episodes,
+             "rng": self.rng.bit_generator.state, "high": self.high.state_dict(),
+             "high_rng": self.high.rng.bit_generator.state, "filter": self.filter.state_dict()}
+        if self.low.learns:
+            s["low"] = self.low.state_dict()
+            s["low_rng"] = self.low.rng.bit_generator.state
+        return s
+
+    def load_state_dict(self, s: dict[str, Any]) -> None:
+        self.env_steps, self.episodes = int(s["env_steps"]), int(s["episodes"])
+        self.rng.bit_generator.state = s["rng"]
+        self.high.load_state_dict(s["high"])
+        self.high.rng.bit_generator.state = s["high_rng"]
+        self.filter.load_state_dict(s["filter"])
+        if self.low.learns:
+            self.low.load_state_dict(s["low"])
+            self.low.rng.bit_generator.state = s["low_rng"]

@@ -1,0 +1,132 @@
+"""Low levels: goal-conditioned policies that act toward the sub-goal g chosen by the high level.
+
+- :class:`GoalDQN` (grids): a goal-conditioned DQN over primitive actions with an intrinsic reward of 1
+  for achieving g (Sec. 3.2). One network outputs Q(s, g, a) for every g, and every transition trains
+  every sub-goal at once from the env's achievement flags (all-goal relabelling, as in hindsight replay).
+- :class:`ScriptedLowLevel` (arms): wraps the scripted OSC controller; it does not learn.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import gymnasium as gym
+import numpy as np
+import torch
+from torch import nn
+
+from .buffers import ReplayBuffer
+from .nets import mlp
+
+__all__ = ["LowLevel", "GoalDQNConfig", "GoalDQN", "ScriptedLowLevel"]
+
+
+class LowLevel(Protocol):
+    learns: bool
+
+    def act(self, obs: np.ndarray, goal: int, explore_eps: float, env: gym.Env) -> Any: ...
+
+
+@dataclass
+class GoalDQNConfig:
+    hidden: tuple[int, ...] = (256, 256)
+    lr: float = 5e-4
+    gamma: float = 0.95
+    batch_size: int = 128
+    buffer_size: int = 100_000
+    learning_starts: int = 1_000
+    train_every: int = 2           # env steps per gradient step
+    target_tau: float = 0.01
+    grad_clip: float = 10.0
+
+
+class GoalDQN:
+    """Goal-conditioned DQN: Q(s, ·, ·) → (N goals × A actions); intrinsic reward 1 on achieving g."""
+
+    learns = True
+
+    def __init__(self, obs_dim: int, n_goals: int, n_actions: int, config: GoalDQNConfig,
+                 generator: torch.Generator, rng: np.random.Generator):
+        self.cfg = config
+        self.n_goals, self.n_actions = n_goals, n_actions
+        self.rng = rng
+        self.q = mlp(obs_dim, config.hidden, n_goals * n_actions, generator)
+        self.q_target = mlp(obs_dim, config.hidden, n_goals * n_actions, generator)
+        self.q_target.load_state_dict(self.q.state_dict())
+        self.opt = torch.optim.Adam(self.q.parameters(), lr=config.lr)
+        self.buffer = ReplayBuffer(config.buffer_size, rng,
+                                   dtypes={"action": np.int64, "before": bool, "after": bool,
+                                           "terminated": bool},
+                                   obs=(obs_dim,), action=(), next_obs=(obs_dim,), before=(n_goals,),
+                                   after=(n_goals,), terminated=())
+        self.steps = 0
+
+    def _q(self, net: nn.Module, obs: torch.Tensor) -> torch.Tensor:
+        return net(obs).view(*obs.shape[:-1], self.n_goals, self.n_actions)
+
+    def act(self, obs: np.ndarray, goal: int, explore_eps: float, env: gym.Env | None = None) -> int:
+        if self.rng.random() < explore_eps:
+            return int(self.rng.integers(self.n_actions))
+        with torch.no_grad():
+            q = self._q(self.q, torch.as_tensor(obs, dtype=torch.float32))[goal]
+        return int(q.argmax())
+
+    def observe(self, obs, action, next_obs, before, after, terminated) -> dict[str, float] | None:
+        self.buffer.add(obs=obs, action=action, next_obs=next_obs, before=before, after=after,
+                        terminated=terminated)
+        self.steps += 1
+        if len(self.buffer) >= self.cfg.learning_starts and self.steps % self.cfg.train_every == 0:
+            return self.update()
+        return None
+
+    def update(self) -> dict[str, float]:
+        b = self.buffer.sample(self.cfg.batch_size)
+        before, after = b["before"].bool(), b["after"].bool()
+        reward = (after & ~before).float()                               # (B, N) intrinsic, per goal
+        done = (reward > 0) | b["terminated"].bool()[:, None]
+        with torch.no_grad():
+            q_next = self._q(self.q_target, b["next_obs"]).max(-1).values  # (B, N)
+            y = reward + self.cfg.gamma * (~done).float() * q_next
+        q = self._q(self.q, b["obs"])                                    # (B, N, A)
+        q_a = q.gather(2, b["action"][:, None, None].expand(-1, self.n_goals, 1)).squeeze(2)
+        weight = (~before).float()          # a goal already achieved is never the option's target
+        loss = (weight * (q_a - y).pow(2)).sum() / weight.sum().clamp_min(1.0)
+        self.opt.zero_grad()
+        loss.backward()
+        nn.utils.clip_grad_norm_(self.q.parameters(), self.cfg.grad_clip)
+        self.opt.step()
+        with torch.no_grad():
+            for p, pt in zip(self.q.parameters(), self.q_target.parameters()):
+                pt.mul_(1 - self.cfg.target_tau).add_(p, alpha=self.cfg.target_tau)
+        return {"low/td_loss": float(loss)}
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"q": self.q.state_dict(), "q_target": self.q_target.state_dict(),
+                "opt": self.opt.state_dict(), "buffer": self.buffer.state_dict(), "steps": self.steps}
+
+    def load_state_dict(self, s: dict[str, Any]) -> None:
+        self.q.load_state_dict(s["q"])
+        self.q_target.load_state_dict(s["q_target"])
+        self.opt.load_state_dict(s["opt"])
+        self.buffer.load_state_dict(s["buffer"])
+        self.steps = int(s["steps"])
+
+
+class ScriptedLowLevel:
+    """The scripted OSC controller as a low level: moves to ``subgoal_target(g)``, actuates the gripper.
+
+    It learns nothing (``learns = False``), so the loop never calls an update on it.
+    """
+
+    learns = False
+
+    def __init__(self, controller: Any):
+        self.controller = controller
+
+    def act(self, obs: np.ndarray, goal: int, explore_eps: float, env: gym.Env) -> np.ndarray:
+        return self.controller.act(env.unwrapped, goal)
+
+    def begin_option(self) -> None:
+        if hasattr(self.controller, "reset"):
+            self.controller.reset()

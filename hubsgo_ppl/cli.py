@@ -1,0 +1,181 @@
+"""``hubsgo``: train, evaluate and inspect HUBS-GO runs.
+
+    hubsgo train TASK [--agent hubsgo|hdqn|ddqn|...] [--model SPEC] [--steps N] [--seed S] [--out DIR] [--resume]
+    hubsgo evaluate RUN_DIR [--episodes K]
+    hubsgo subgoals RUN_DIR
+    hubsgo tasks
+    hubsgo sweep SWEEP.yaml [--backend local|ray] [--workers K]
+    hubsgo report SWEEP_DIR
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any, Sequence
+
+__all__ = ["main", "build_parser"]
+
+
+def _fmt_ranking(table: dict[str, Any]) -> str:
+    lines = [f"G* from {table['num_samples']:,} critic samples (most probable sub-goal sets):",
+             f"{'rank':>4}  {'P(sample)':>9}  {'P(exact)':>8}  sub-goals"]
+    for i, r in enumerate(table["ranking"], 1):
+        exact = "" if r.get("exact_prob") is None else f"{r['exact_prob']:.4f}"
+        tie = "  ≈ tie with the one above" if r.get("near_tie") and i > 1 else ""
+        lines.append(f"{i:>4}  {r['prob']:>9.4f}  {exact:>8}  {{{', '.join(r['subgoals'])}}}{tie}")
+    lines.append("marginals P(w=1): " + ", ".join(f"{n}={p:.2f}" for n, p in table["marginals"].items()))
+    return "\n".join(lines)
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    from .experiments.run import RunConfig, train
+
+    out = Path(args.out) if args.out else Path("runs") / f"{args.task}-{args.agent}-s{args.seed}"
+    cfg = RunConfig(task=args.task, agent=args.agent, model=args.model, graph=args.graph, steps=args.steps,
+                    seed=args.seed, low_level=args.low_level, overrides=args.set or [])
+    summary = train(cfg, out, resume=args.resume, progress=not args.no_progress)
+    print(f"run: {summary['run_dir']}  episodes={summary['episodes']}  env_steps={summary['env_steps']}  "
+          f"wall={summary['wall_time']:.0f}s")
+    table_path = out / "subgoals.json"
+    if table_path.exists():
+        print(_fmt_ranking(json.loads(table_path.read_text())))
+    return 0
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    from .experiments.run import evaluate
+
+    r = evaluate(args.run_dir, episodes=args.episodes, seed=args.seed)
+    line = (f"{r['agent']} on {r['task']}: greedy return {r['mean_return']:.4f} ± {r['se_return']:.4f} (s.e.), "
+            f"success {r['success_rate']:.2f} over {r['episodes']} episodes")
+    if "optimal_return" in r:
+        line += f"; optimal {r['optimal_return']:.4f} ({100 * r['fraction_of_optimal']:.1f}% of it)"
+    print(line)
+    return 0
+
+
+def cmd_subgoals(args: argparse.Namespace) -> int:
+    from .experiments.run import RunError, load_run, subgoal_table
+
+    run_dir = Path(args.run_dir)
+    path = run_dir / "subgoals.json"
+    if path.exists() and not args.recompute:
+        table = json.loads(path.read_text())
+    else:
+        resolved, env, agent, _ = load_run(run_dir)
+        if not (hasattr(agent, "filter") and hasattr(agent.filter, "critic")):
+            raise RunError(f"{run_dir}: agent {resolved['agent']!r} has no sub-goal critic; "
+                           "train with --agent hubsgo to learn sub-goal sets")
+        table = subgoal_table(agent.filter.critic, list(env.unwrapped.subgoal_names), args.samples)
+    print(_fmt_ranking(table))
+    return 0
+
+
+def cmd_tasks(args: argparse.Namespace) -> int:
+    from .envs import tasks
+
+    for name, info in tasks().items():
+        cat = info.catalogue
+        print(f"{name}  ({info.family}, gymnasium id {info.env_id})")
+        if cat.description:
+            print(f"    {cat.description.strip()}")
+        for sg in cat.subgoals:
+            desc = f": {sg.description}" if sg.description else ""
+            print(f"    - {sg.name} [{sg.kind}]{desc}")
+    return 0
+
+
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from .experiments.sweep import run_sweep
+
+    result = run_sweep(args.sweep, backend=args.backend, workers=args.workers, out=args.out,
+                       progress=not args.no_progress)
+    print(f"sweep {result['sweep_dir']}: {result['finished']} finished, {result['skipped']} skipped "
+          f"(already done), {result['retried']} retried, {len(result['failed'])} failed")
+    for f in result["failed"]:
+        print(f"  failed: {f}")
+    return 1 if result["failed"] else 0
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from .experiments.report import write_report
+
+    paths = write_report(args.sweep_dir, out=args.out)
+    for kind, path in paths.items():
+        print(f"{kind}: {path}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from .agents.factory import agent_names
+
+    p = argparse.ArgumentParser(prog="hubsgo", description="HUBS-GO: Bayesian sub-goal optimisation for HRL")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    t = sub.add_parser("train", help="train an agent on a task and write a run directory")
+    t.add_argument("task", help="task name (see `hubsgo tasks`) or a catalogue .yaml")
+    t.add_argument("--agent", default="hubsgo", choices=agent_names())
+    t.add_argument("--model", help="critic spec: a built-in name (e.g. keydoor-specific) or a .yaml path")
+    t.add_argument("--graph", choices=["specific", "fully_connected", "independent"],
+                   help="override the spec's graph preset")
+    t.add_argument("--steps", type=int, help="environment-step budget (default: per task family)")
+    t.add_argument("--seed", type=int, default=0)
+    t.add_argument("--out", help="run directory (default runs/TASK-AGENT-sSEED)")
+    t.add_argument("--resume", action="store_true", help="continue the run in --out from its checkpoint")
+    t.add_argument("--low-level", choices=["learned", "scripted"], help="low level (default: per family)")
+    t.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override a hyperparameter, e.g. --set loop.option_steps=30 (repeatable)")
+    t.add_argument("--no-progress", action="store_true", help="no progress bar")
+    t.set_defaults(func=cmd_train)
+
+    e = sub.add_parser("evaluate", help="greedy return and success rate of a trained run")
+    e.add_argument("run_dir")
+    e.add_argument("--episodes", type=int, default=10)
+    e.add_argument("--seed", type=int, default=None, help="evaluation seed (default: derived from the run's)")
+    e.set_defaults(func=cmd_evaluate)
+
+    s = sub.add_parser("subgoals", help="print the learned sub-goal sets G* of a HUBS-GO run")
+    s.add_argument("run_dir")
+    s.add_argument("--samples", type=int, default=10_000)
+    s.add_argument("--recompute", action="store_true", help="recompute from the checkpoint")
+    s.set_defaults(func=cmd_subgoals)
+
+    w = sub.add_parser("sweep", help="run a grid of tasks x agents x variants x seeds (resumable)")
+    w.add_argument("sweep", help="sweep grid .yaml (e.g. sweeps/quick.yaml) or a built-in sweep name")
+    w.add_argument("--backend", choices=["local", "ray"], default="local")
+    w.add_argument("--workers", type=int, default=2)
+    w.add_argument("--out", help="sweep directory (default runs/sweeps/NAME)")
+    w.add_argument("--no-progress", action="store_true")
+    w.set_defaults(func=cmd_sweep)
+
+    r = sub.add_parser("report", help="tables (as the paper's Tables 1-2), learning curves and a CSV")
+    r.add_argument("sweep_dir")
+    r.add_argument("--out", help="report folder (default SWEEP_DIR/report)")
+    r.set_defaults(func=cmd_report)
+
+    k = sub.add_parser("tasks", help="list the tasks and their sub-goal catalogues")
+    k.set_defaults(func=cmd_tasks)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    from .envs import UnknownTaskError
+    from .experiments.io import CheckpointError
+    from .experiments.run import RunError
+    from .specs import SpecError
+
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except (SpecError, RunError, CheckpointError, UnknownTaskError, FloatingPointError) as exc:
+        msg = str(exc).strip().replace("\n", "; ")
+        print(f"hubsgo: error: {msg}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

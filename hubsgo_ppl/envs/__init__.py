@@ -1,0 +1,101 @@
+"""Tasks: MiniGrid mazes and robosuite arm tasks, each declared by a catalogue YAML in ``envs/``.
+
+Registration is explicit (no import side effects, cf. MiniGrid #455)::
+
+    import hubsgo_ppl.envs as tasks
+    tasks.register()                       # registers every built-in task with Gymnasium, once
+    env = tasks.make("keydoor", seed=0)    # or gymnasium.make("hubsgo/KeyDoor-v0")
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+
+from ..resources import envs_dir
+from ..specs import SpecError
+from .subgoals import Catalogue, SubgoalDef, load_catalogue
+
+__all__ = ["TaskInfo", "Catalogue", "SubgoalDef", "load_catalogue", "tasks", "get_task", "register",
+           "make", "UnknownTaskError"]
+
+# family -> entry point of the env class that takes (catalogue=..., **kwargs)
+_FAMILY_ENTRY = {
+    "minigrid": "hubsgo_ppl.envs.minigrid.maze:MazeEnv",
+    "robosuite": "hubsgo_ppl.envs.robosuite.gym_wrapper:make_robosuite_task",
+}
+
+
+class UnknownTaskError(SpecError):
+    """A task name that is neither built in nor a catalogue file."""
+
+
+@dataclass(frozen=True)
+class TaskInfo:
+    name: str           # short name used by the CLI, e.g. "keydoor"
+    env_id: str         # Gymnasium id, e.g. "hubsgo/KeyDoor-v0"
+    family: str
+    catalogue_path: Path
+
+    @property
+    def catalogue(self) -> Catalogue:
+        return load_catalogue(self.catalogue_path)
+
+
+def _env_id(cat: Catalogue) -> str:
+    camel = cat.title or "".join(p.capitalize() for p in cat.task.replace("-", "_").split("_"))
+    return f"hubsgo/{camel}-v0"
+
+
+def tasks(directory: Path | None = None) -> dict[str, TaskInfo]:
+    """Every task catalogue in ``directory`` (default: the built-in ``envs/``), by task name."""
+    directory = Path(directory) if directory else envs_dir()
+    out: dict[str, TaskInfo] = {}
+    for path in sorted(directory.glob("*.yaml")):
+        cat = load_catalogue(path)
+        out[cat.task] = TaskInfo(cat.task, _env_id(cat), cat.family, path)
+    return out
+
+
+def get_task(name_or_path: str | Path) -> TaskInfo:
+    """A built-in task by name, or a user's catalogue by path."""
+    p = Path(name_or_path)
+    if p.suffix in (".yaml", ".yml"):
+        cat = load_catalogue(p)
+        return TaskInfo(cat.task, _env_id(cat), cat.family, p)
+    known = tasks()
+    if str(name_or_path) not in known:
+        raise UnknownTaskError(
+            f"unknown task {str(name_or_path)!r}; use one of: {', '.join(sorted(known))} "
+            f"(`hubsgo tasks` lists them), or a path to a catalogue .yaml")
+    return known[str(name_or_path)]
+
+
+_registered = False
+
+
+def register() -> list[str]:
+    """Register every built-in task with Gymnasium (idempotent). Returns the ids."""
+    global _registered
+    ids = []
+    for info in tasks().values():
+        if info.env_id not in gym.registry:
+            gym.register(id=info.env_id, entry_point=_FAMILY_ENTRY[info.family],
+                         kwargs={"catalogue": str(info.catalogue_path)})
+        ids.append(info.env_id)
+    _registered = True
+    return ids
+
+
+def make(name_or_path: str | Path, seed: int | None = None, **kwargs: Any) -> gym.Env:
+    """Build a task env (unwrapped-compatible Gymnasium env); reset it with ``seed`` if given."""
+    info = get_task(name_or_path)
+    module, cls = _FAMILY_ENTRY[info.family].split(":")
+    factory = getattr(__import__(module, fromlist=[cls]), cls)
+    env = factory(catalogue=str(info.catalogue_path), **kwargs)
+    if seed is not None:
+        env.reset(seed=seed)
+    return env

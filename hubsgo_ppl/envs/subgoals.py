@@ -1,0 +1,76 @@
+"""Sub-goal catalogues: the named candidate sub-goals G0 of a task, declared in YAML under ``envs/``.
+
+A catalogue is shared by every task family. Each sub-goal has a ``kind`` (an achievement predicate
+known to the family, e.g. MiniGrid ``at``/``carrying``/``door_open``/``goal``, robosuite
+``reach_above``/``grasp``/``place_on``/...) with its ``args``; the family turns it into an achievement
+test and a target for the low level.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import Field, field_validator
+
+from ..specs import SpecError, StrictModel, load_yaml, validate_spec
+
+__all__ = ["SubgoalDef", "Catalogue", "load_catalogue"]
+
+
+class SubgoalDef(StrictModel):
+    """One candidate sub-goal: a named predicate with arguments."""
+
+    name: str = Field(description="unique name, e.g. 'yellow_key'")
+    kind: str = Field(description="predicate kind understood by the task family")
+    args: dict[str, Any] = Field(default_factory=dict, description="arguments of the predicate")
+    description: str = ""
+
+    @field_validator("name")
+    @classmethod
+    def _name_ok(cls, v: str) -> str:
+        if not v or not v.replace("_", "").replace("-", "").isalnum():
+            raise ValueError(f"sub-goal name {v!r} must be letters, digits, '_' or '-'")
+        return v
+
+
+class Catalogue(StrictModel):
+    """A task: its family, family-specific options, and its sub-goal catalogue (G0)."""
+
+    task: str = Field(description="short name used on the command line, e.g. 'keydoor'")
+    title: str = Field(default="", description="CamelCase name for the Gymnasium id, e.g. 'KeyDoor'")
+    family: Literal["minigrid", "robosuite"]
+    description: str = ""
+    options: dict[str, Any] = Field(default_factory=dict)
+    subgoals: list[SubgoalDef]
+    source: str = Field(default="<catalogue>", exclude=True)
+
+    @field_validator("subgoals")
+    @classmethod
+    def _unique(cls, v: list[SubgoalDef]) -> list[SubgoalDef]:
+        if not v:
+            raise ValueError("a task needs at least one sub-goal")
+        seen: set[str] = set()
+        for sg in v:
+            if sg.name in seen:
+                raise ValueError(f"duplicate sub-goal name {sg.name!r}; names must be unique")
+            seen.add(sg.name)
+        return v
+
+    @property
+    def names(self) -> list[str]:
+        return [sg.name for sg in self.subgoals]
+
+    def resolve(self, relative: str) -> Path:
+        """A path named in ``options`` (e.g. a layout file), relative to the catalogue's folder."""
+        return Path(self.source).parent / relative
+
+
+def load_catalogue(path: str | Path) -> Catalogue:
+    """Load and validate a task catalogue YAML; errors name the file and key."""
+    data = load_yaml(path)
+    cat = validate_spec(Catalogue, data, source=str(path))
+    cat.source = str(path)
+    return cat
+
+

@@ -1,0 +1,47 @@
+"""Learning-curve pictures (matplotlib, Agg), written atomically."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+__all__ = ["rolling_mean", "plot_learning_curve"]
+
+
+def rolling_mean(x: Sequence[float], window: int) -> np.ndarray:
+    x = np.asarray(x, dtype=float)
+    if x.size == 0:
+        return x
+    c = np.cumsum(np.insert(x, 0, 0.0))
+    out = np.empty_like(x)
+    for i in range(x.size):
+        lo = max(0, i + 1 - window)
+        out[i] = (c[i + 1] - c[lo]) / (i + 1 - lo)
+    return out
+
+
+def plot_learning_curve(steps: Sequence[float], returns: Sequence[float], success: Sequence[float],
+                        path: str | Path, title: str = "", window: int = 20) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .io import atomic_write
+
+    fig, ax = plt.subplots(figsize=(7, 4))
+    ax.plot(steps, returns, color="0.8", lw=0.8, label="episode return")
+    ax.plot(steps, rolling_mean(returns, window), color="C0", lw=2, label=f"return (mean of {window})")
+    ax.plot(steps, rolling_mean(success, window), color="C2", lw=1.5, ls="--", label="success rate")
+    ax.set_xlabel("environment steps")
+    ax.set_ylabel("return / success")
+    ax.set_ylim(-0.05, 1.05)
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="lower right", fontsize=8)
+    fig.tight_layout()
+    atomic_write(path, lambda fh: fig.savefig(fh, format="png", dpi=110))
+    plt.close(fig)
+    return Path(path)
