@@ -4,6 +4,7 @@
     hubsgo evaluate RUN_DIR [--episodes K]
     hubsgo subgoals RUN_DIR
     hubsgo tasks
+    hubsgo diagnose RUN_DIR [--chains 4]
     hubsgo sweep SWEEP.yaml [--backend local|ray] [--workers K]
     hubsgo report SWEEP_DIR
 """
@@ -13,6 +14,8 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+
+import numpy as np
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -88,6 +91,25 @@ def cmd_tasks(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_diagnose(args: argparse.Namespace) -> int:
+    import pandas as pd
+
+    from .diagnostics.diagnose import diagnose
+
+    result = diagnose(args.run_dir, chains=args.chains, draws=args.draws, burn_in=args.burn_in)
+    table = result["summary"]
+    with pd.option_context("display.width", 120, "display.max_columns", 20):
+        print(f"ArviZ summary of q(w) from {result['chains']} chains x {result['draws']} draws:")
+        print(table.to_string(float_format=lambda v: f"{v:.3f}"))
+    r_hat = table["r_hat"].to_numpy(dtype=float)
+    const = table["constant"].to_numpy(dtype=bool) if "constant" in table else np.zeros(len(table), bool)
+    worst = np.nanmax(np.where(const, np.nan, r_hat)) if (~const).any() else float("nan")
+    print(f"max r_hat over non-constant sub-goals: {worst:.4f}")
+    for kind, path in result["paths"].items():
+        print(f"{kind}: {path}")
+    return 0
+
+
 def cmd_sweep(args: argparse.Namespace) -> int:
     from .experiments.sweep import run_sweep
 
@@ -142,6 +164,13 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--samples", type=int, default=10_000)
     s.add_argument("--recompute", action="store_true", help="recompute from the checkpoint")
     s.set_defaults(func=cmd_subgoals)
+
+    d = sub.add_parser("diagnose", help="ArviZ summary, trace/forest/posterior plots, MRF graph, netCDF")
+    d.add_argument("run_dir")
+    d.add_argument("--chains", type=int, default=4)
+    d.add_argument("--draws", type=int, default=2000)
+    d.add_argument("--burn-in", type=int, default=256)
+    d.set_defaults(func=cmd_diagnose)
 
     w = sub.add_parser("sweep", help="run a grid of tasks x agents x variants x seeds (resumable)")
     w.add_argument("sweep", help="sweep grid .yaml (e.g. sweeps/quick.yaml) or a built-in sweep name")

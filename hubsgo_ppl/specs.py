@@ -71,3 +71,128 @@ def validate_spec(cls: type[M], data: dict[str, Any], source: str = "<spec>") ->
         return cls.model_validate(data)
     except ValidationError as err:
         raise SpecError(format_validation_error(source, err)) from None
+
+
+# ---------------------------------------------------------------------------------------------
+# Critic model specs (models/*.yaml): sub-goals, signed edges, prior, likelihood, inference.
+# ---------------------------------------------------------------------------------------------
+
+from typing import Literal  # noqa: E402
+
+from pydantic import ConfigDict as _ConfigDict  # noqa: E402
+from pydantic import Field, field_validator, model_validator  # noqa: E402
+
+__all__ += ["ComponentSpec", "InferenceSpec", "ModelSpec", "load_model_spec", "list_model_specs"]
+
+EdgeSign = Literal["positive", "negative", "unknown"]
+
+
+class ComponentSpec(BaseModel):
+    """A registered prior or likelihood: ``{name: ..., **params}``."""
+
+    model_config = _ConfigDict(extra="allow")
+    name: str = Field(description="registered name, e.g. 'bernoulli' or 'gaussian'")
+
+    def params(self) -> dict[str, Any]:
+        return dict(self.model_extra or {})
+
+
+class InferenceSpec(StrictModel):
+    """Inference settings; the same fields and defaults as ``infer.critic.InferenceConfig``."""
+
+    lr: float = Field(0.05, gt=0, description="Adam step size")
+    burn_in: int = Field(32, ge=0, description="MH sweeps per update")
+    num_samples: int = Field(64, ge=2, description="MH chains / ELBO particles per update")
+    kernel: Literal["single_site", "block"] = "single_site"
+    baseline_beta: float = Field(0.9, ge=0, lt=1, description="decaying-average baseline factor")
+    init_scale: float = Field(1.0, description="initial coupling = init_scale * edge sign")
+    exact_max_n: int = Field(16, ge=0, le=20, description="exact log Z up to this N")
+
+
+class ModelSpec(StrictModel):
+    """A critic spec; see models/example-specific.yaml."""
+
+    name: str
+    task: str | None = None
+    subgoals: list[str]
+    graph: Literal["specific", "fully_connected", "independent"] = "specific"
+    edges: list[tuple[str, str, EdgeSign]] = Field(default_factory=list)
+    prior: ComponentSpec = Field(default_factory=lambda: ComponentSpec(name="bernoulli"))
+    likelihood: ComponentSpec = Field(default_factory=lambda: ComponentSpec(name="gaussian"))
+    inference: InferenceSpec = Field(default_factory=InferenceSpec)
+
+    @field_validator("subgoals")
+    @classmethod
+    def _subgoals_ok(cls, v: list[str]) -> list[str]:
+        if not v:
+            raise ValueError("no sub-goals (N = 0); list at least one candidate sub-goal")
+        seen: set[str] = set()
+        for i, name in enumerate(v):
+            if not name:
+                raise ValueError(f"subgoals[{i}] is empty; give every sub-goal a name")
+            if name in seen:
+                raise ValueError(f"subgoals[{i}]: duplicate name {name!r}; names must be unique")
+            seen.add(name)
+        return v
+
+    @field_validator("prior")
+    @classmethod
+    def _prior_ok(cls, v: ComponentSpec) -> ComponentSpec:
+        from .infer.priors import PRIORS
+
+        if v.name not in PRIORS:
+            raise ValueError(f"unknown prior {v.name!r}; registered: {', '.join(sorted(PRIORS))}")
+        return v
+
+    @field_validator("likelihood")
+    @classmethod
+    def _likelihood_ok(cls, v: ComponentSpec) -> ComponentSpec:
+        from .infer.likelihoods import get_likelihood
+
+        get_likelihood(v.name, **v.params())  # ValueError names the bad key, or lists registered names
+        return v
+
+    @model_validator(mode="after")
+    def _graph_ok(self) -> "ModelSpec":
+        names = set(self.subgoals)
+        pairs: set[frozenset[str]] = set()
+        for i, (u, v, _) in enumerate(self.edges):
+            for end in (u, v):
+                if end not in names:
+                    raise ValueError(f"edges[{i}]: {end!r} is not a sub-goal; use one of: {', '.join(self.subgoals)}")
+            if u == v:
+                raise ValueError(f"edges[{i}]: self-edge on {u!r}; an edge joins two different sub-goals")
+            if frozenset((u, v)) in pairs:
+                raise ValueError(f"edges[{i}]: duplicate edge {u!r}-{v!r}; give each pair once")
+            pairs.add(frozenset((u, v)))
+        from .graph import SubgoalGraph
+        from .infer.priors import get_prior
+
+        get_prior(self.prior.name, SubgoalGraph(self.subgoals), **self.prior.params())
+        return self
+
+
+def list_model_specs() -> list[str]:
+    """Names of the built-in critic specs (``models/*.yaml``)."""
+    from .resources import models_dir
+
+    return sorted(p.stem for p in models_dir().glob("*.yaml"))
+
+
+def load_model_spec(name_or_path: str | Path, graph: str | None = None) -> ModelSpec:
+    """Load a critic spec by built-in name (any cwd) or by path; ``graph`` overrides the preset."""
+    from .resources import models_dir
+
+    path = Path(name_or_path)
+    if not path.is_file():
+        builtin = models_dir() / f"{name_or_path}.yaml"
+        if builtin.is_file():
+            path = builtin
+        elif path.suffix in (".yaml", ".yml") or path.parent != Path("."):
+            raise SpecError(f"{path}: no such spec file; check the path or use a built-in name: {', '.join(list_model_specs())}")
+        else:
+            raise SpecError(f"{name_or_path}: unknown model spec; use a path or one of: {', '.join(list_model_specs())}")
+    data = load_yaml(path)
+    if graph is not None:
+        data = {**data, "graph": graph}
+    return validate_spec(ModelSpec, data, source=str(path))

@@ -127,7 +127,7 @@ class HighLevelDQN:
         self.updates += 1
         batch = HighLevelBatch(q_taken=q_taken.detach(), q_next=q_next_t, reward=b["reward"],
                                discount=b["discount"], available=avail)
-        return {"high/td_loss": float(loss)}, batch
+        return {"high/td_loss": loss.item()}, batch
 
     @torch.no_grad()
     def _soft_update(self) -> None:

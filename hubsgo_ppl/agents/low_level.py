@@ -99,7 +99,7 @@ class GoalDQN:
         with torch.no_grad():
             for p, pt in zip(self.q.parameters(), self.q_target.parameters()):
                 pt.mul_(1 - self.cfg.target_tau).add_(p, alpha=self.cfg.target_tau)
-        return {"low/td_loss": float(loss)}
+        return {"low/td_loss": loss.item()}
 
     def state_dict(self) -> dict[str, Any]:
         return {"q": self.q.state_dict(), "q_target": self.q_target.state_dict(),

@@ -11,18 +11,34 @@ PRESETS: dict[str, dict[str, Any]] = {
     "minigrid": {
         "steps": 150_000,
         "low_level": "learned",
+        "env": {},                      # keyword arguments of the env, e.g. max_steps
         "loop": {"option_steps": 30, "explore_fraction": 0.3, "low_explore_fraction": 0.3,
                  "filter_fraction": 0.5},
         "high": {"hidden": [128, 128], "lr": 1e-3, "batch_size": 64},
         "low": {"hidden": [256, 256], "lr": 5e-4, "batch_size": 128, "learning_starts": 1000},
+        # flat baselines (Stable-Baselines3 keyword arguments; agents/flat.py). dqn and ddqn share "dqn".
+        "dqn": {"learning_rate": 5e-4, "buffer_size": 100_000, "learning_starts": 1000, "batch_size": 64,
+                "train_freq": 4, "target_update_interval": 1000, "exploration_fraction": 0.3,
+                "exploration_final_eps": 0.05, "gamma": 0.99, "policy_kwargs": {"net_arch": [256, 256]}},
+        "ppo": {"learning_rate": 3e-4, "n_steps": 1024, "batch_size": 64, "n_epochs": 4, "gamma": 0.99,
+                "ent_coef": 0.01, "policy_kwargs": {"net_arch": [128, 128]}},
+        # HIRO (agents/hiro.py, HIROConfig); goals are (dx, dy) cell offsets
+        "hiro": {"c": 10, "hidden": [128, 128], "lr": 3e-4, "batch_size": 64, "low_learning_starts": 1000,
+                 "temperature": 0.3, "high_noise": 0.3},
     },
     "robosuite": {
         "steps": 30_000,
         "low_level": "scripted",
+        "env": {},
         "loop": {"option_steps": 120, "explore_fraction": 0.3, "filter_fraction": 0.5,
                  "low_explore_start": 0.0, "low_explore_end": 0.0},
         "high": {"hidden": [128, 128], "lr": 1e-3, "batch_size": 32, "learning_starts": 32},
         "low": {},
+        "td3": {"learning_rate": 1e-3, "buffer_size": 100_000, "learning_starts": 1000, "batch_size": 256,
+                "train_freq": 1, "gamma": 0.99, "noise_sigma": 0.1, "policy_kwargs": {"net_arch": [256, 256]}},
+        # goals are end-effector offsets (m) within +-goal_scale
+        "hiro": {"c": 10, "hidden": [256, 256], "lr": 3e-4, "batch_size": 128, "low_learning_starts": 1000,
+                 "goal_scale": 0.3, "low_noise": 0.1},
     },
 }
 

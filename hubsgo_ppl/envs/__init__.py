@@ -50,14 +50,28 @@ def _env_id(cat: Catalogue) -> str:
     return f"hubsgo/{camel}-v0"
 
 
+_CACHE: dict[tuple, dict[str, TaskInfo]] = {}
+
+
 def tasks(directory: Path | None = None) -> dict[str, TaskInfo]:
-    """Every task catalogue in ``directory`` (default: the built-in ``envs/``), by task name."""
+    """Every task catalogue in ``directory`` (default: the built-in ``envs/``), by task name.
+
+    Cached on the files' names and modification times, so edits to a catalogue are picked up.
+    """
     directory = Path(directory) if directory else envs_dir()
-    out: dict[str, TaskInfo] = {}
-    for path in sorted(directory.glob("*.yaml")):
-        cat = load_catalogue(path)
-        out[cat.task] = TaskInfo(cat.task, _env_id(cat), cat.family, path)
-    return out
+    paths = sorted(directory.glob("*.yaml"))
+    key = (str(directory), tuple((str(p), p.stat().st_mtime_ns) for p in paths))
+    if key not in _CACHE:
+        out: dict[str, TaskInfo] = {}
+        for path in paths:
+            cat = load_catalogue(path)
+            if cat.task in out:
+                raise SpecError(f"{path}: task: {cat.task!r} is also declared by {out[cat.task].catalogue_path}; "
+                                "give each catalogue a unique `task` name")
+            out[cat.task] = TaskInfo(cat.task, _env_id(cat), cat.family, path)
+        _CACHE.clear()
+        _CACHE[key] = out
+    return dict(_CACHE[key])
 
 
 def get_task(name_or_path: str | Path) -> TaskInfo:

@@ -86,7 +86,7 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
         "task": info.name, "task_ref": str(cfg.task), "family": info.family,
         "agent": cfg.agent, "seed": int(cfg.seed), "hyper": hyper,
         "checkpoint_every": cfg.checkpoint_every, "history_every": cfg.history_every, "threads": cfg.threads,
-        "versions": {"hubsgo_ppl": __version__, "torch": torch.__version__, "python": platform.python_version()},
+        "versions": {"hubsgo_ppl": __version__, "torch": str(torch.__version__), "python": platform.python_version()},
     }
     names = info.catalogue.names
     if cfg.agent == "hubsgo" or cfg.model is not None:
@@ -105,7 +105,7 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
 
 def _build(resolved: dict[str, Any]):
     register()
-    env = make(resolved["task_ref"])   # a built-in name, or the user's catalogue path
+    env = make(resolved["task_ref"], **resolved["hyper"].get("env", {}))   # built-in name or catalogue path
     critic = _critic_from_config(resolved) if resolved["agent"] == "hubsgo" else None
     agent = build_agent(resolved["agent"], env, resolved["hyper"], resolved["seed"], critic=critic)
     return env, agent
@@ -278,8 +278,13 @@ def evaluate(run_dir: str | Path, episodes: int = 10, seed: int | None = None) -
     run_dir = Path(run_dir)
     resolved, env, agent, _ = load_run(run_dir)
     base = int(resolved["seed"]) + 1_000_003 if seed is None else int(seed)
-    rets, succ, lengths = [], [], []
+    rets, succ, lengths, optimal = [], [], [], []
+    if resolved["family"] == "minigrid":
+        from ..envs.minigrid.bfs import optimal_return
     for i in range(episodes):
+        if resolved["family"] == "minigrid":      # BFS from this episode's start state
+            env.reset(seed=episode_seed(base, i))
+            optimal.append(float(optimal_return(env)))
         stats = agent.run_episode(train=False, seed=episode_seed(base, i))
         rets.append(stats.ret)
         succ.append(float(stats.success))
@@ -290,10 +295,8 @@ def evaluate(run_dir: str | Path, episodes: int = 10, seed: int | None = None) -
               "se_return": float(np.std(rets, ddof=1) / math.sqrt(n)) if n > 1 else 0.0,
               "success_rate": float(np.mean(succ)), "mean_length": float(np.mean(lengths)),
               "returns": [float(r) for r in rets]}
-    if resolved["family"] == "minigrid":
-        from ..envs.minigrid.bfs import optimal_return
-
-        opt = float(optimal_return(env))
+    if optimal:
+        opt = float(np.mean(optimal))
         result["optimal_return"] = opt
         result["fraction_of_optimal"] = result["mean_return"] / opt if opt > 0 else float("nan")
     write_json(run_dir / "eval.json", result)

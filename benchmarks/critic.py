@@ -1,0 +1,112 @@
+"""Critic benchmark (not a test): update time, sampler throughput, exact log Z, learning budgets.
+
+Run: ``.venv/bin/python benchmarks/critic.py`` (one CPU thread; results go to docs/benchmarks.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import pyro
+import torch
+
+from hubsgo_ppl.distributions import PairwiseMRF
+from hubsgo_ppl.graph import SubgoalGraph
+from hubsgo_ppl.infer.critic import InferenceConfig, SubgoalCritic, TDBatch
+from hubsgo_ppl.infer.mh import MRFMHKernel, run_chains
+
+
+def sparse_graph(n: int, seed: int = 0) -> SubgoalGraph:
+    """A chain plus n/2 random signed chords: a 'specific' graph of a realistic density."""
+    g = torch.Generator().manual_seed(seed)
+    names = [f"g{i}" for i in range(n)]
+    edges = {(i, i + 1): 1 for i in range(n - 1)}
+    while len(edges) < n - 1 + n // 2 and n > 2:
+        a, b = sorted(torch.randint(0, n, (2,), generator=g).tolist())
+        if a != b and (a, b) not in edges:
+            edges[(a, b)] = -1
+    return SubgoalGraph(names, [(names[a], names[b], s) for (a, b), s in edges.items()])
+
+
+def td_batch(n: int, b: int = 32) -> TDBatch:
+    g = torch.Generator().manual_seed(1)
+    q = torch.randn(b, n, generator=g)
+    return TDBatch(q[:, 0], q, torch.rand(b, generator=g), torch.full((b,), 0.9))
+
+
+def time_updates(n: int, repeats: int) -> float:
+    critic = SubgoalCritic(sparse_graph(n), config=InferenceConfig(), seed=0)
+    batch = td_batch(n)
+    for _ in range(3):
+        critic.update(batch)
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        critic.update(batch)
+        times.append(time.perf_counter() - t)
+    return statistics.median(times)
+
+
+def sampler_rates(n: int = 10) -> tuple[float, float]:
+    graph = sparse_graph(n)
+    g = torch.Generator().manual_seed(0)
+    theta, coupling = torch.randn(n, generator=g), torch.randn(graph.num_edges, generator=g)
+    t = time.perf_counter()
+    run_chains(theta, coupling, graph.edge_index, num_chains=64, num_steps=200, generator=g)
+    batched = 64 * 200 / (time.perf_counter() - t)
+    kernel = MRFMHKernel(theta, coupling, graph.edge_index, seed=0)
+    mcmc = pyro.infer.MCMC(kernel, num_samples=1000, warmup_steps=0, disable_progbar=True)
+    t = time.perf_counter()
+    mcmc.run()
+    return batched, 1000 / (time.perf_counter() - t)
+
+
+def log_z_time(n: int = 20) -> float:
+    graph = sparse_graph(n)
+    theta = torch.randn(n, requires_grad=True)
+    coupling = torch.randn(graph.num_edges, requires_grad=True)
+    t = time.perf_counter()
+    PairwiseMRF(theta, coupling, graph.edge_index).log_partition().backward()
+    return time.perf_counter() - t
+
+
+def keydoor_budget(preset: str, max_updates: int = 600, seed: int = 0) -> int | None:
+    graph = SubgoalGraph(["a1", "b1", "a2", "b2"], [("a1", "b1", 1), ("a2", "b2", 1), ("a1", "a2", -1), ("b1", "b2", -1)])
+    critic = SubgoalCritic(graph.preset(preset), seed=seed)
+    good = torch.tensor([[1.0, 1, 0, 0], [0.0, 0, 1, 1]])
+
+    def residuals(w):
+        ok = w[..., 0] * w[..., 1] * (1 - w[..., 2]) * (1 - w[..., 3]) + (1 - w[..., 0]) * (1 - w[..., 1]) * w[..., 2] * w[..., 3]
+        return (2.0 * (1.0 - ok)).unsqueeze(-1).expand(w.shape[:-1] + (4,))
+
+    for step in range(1, max_updates + 1):
+        critic.update(residuals)
+        if step % 10 == 0 and float(critic.distribution().log_prob(good).exp().sum()) > 0.8:
+            return step
+    return None
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--repeats", type=int, default=20)
+    parser.add_argument("--seeds", type=int, default=3, help="seeds for the learning-budget runs")
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    print(f"torch {torch.__version__}, pyro {pyro.__version__}, 1 thread")
+    print("\n| N | graph edges | ms / update (S=64, burn-in 32) |\n|---|---|---|")
+    for n in (5, 10, 20, 64):
+        ms = 1000 * time_updates(n, args.repeats if n < 64 else max(5, args.repeats // 2))
+        print(f"| {n} | {sparse_graph(n).num_edges} | {ms:.1f} |")
+    batched, mcmc = sampler_rates()
+    print(f"\nsampler, N=10: batched {batched:,.0f} chain-sweeps/s; pyro.infer.MCMC {mcmc:,.0f} sweeps/s ({batched / mcmc:.0f}x)")
+    print(f"exact log Z + backward at N=20: {log_z_time():.3f} s")
+    print("\nKeyDoor learning budget (updates until > 0.8 mass on the two pair configs; checked every 10):")
+    for preset in ("specific", "fully_connected", "independent"):
+        budgets = [keydoor_budget(preset, seed=s) for s in range(args.seeds)]
+        print(f"  {preset}: {budgets}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,62 @@
+"""``hubsgo diagnose RUN_DIR``: ArviZ checks and pictures of a HUBS-GO run's indicator posterior.
+
+Draws several independent MH chains from the trained critic, converts them to ArviZ data, and writes
+into ``RUN_DIR/diagnostics/``: ``summary.csv`` (mean, sd, ess_bulk, ess_tail, r_hat per sub-goal),
+``trace.png``, ``forest.png``, ``posterior.png``, ``mrf_graph.png`` (the learned MRF),
+``marginals.png`` (P(w_i = 1) over training, from ``critic_history.csv``) and ``posterior.nc``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..experiments.logger import read_csv_rows
+from ..experiments.run import RunError, load_run
+from .arviz import save_netcdf, summary, to_inference_data
+from .plots import plot_forest, plot_marginals_history, plot_mrf_graph, plot_posterior, plot_trace
+
+__all__ = ["diagnose"]
+
+
+def diagnose(run_dir: str | Path, chains: int = 4, draws: int = 2000, burn_in: int = 256,
+             out: str | Path | None = None) -> dict[str, Any]:
+    """Run the diagnostics; returns the summary table and the paths written."""
+    if chains < 2:
+        raise RunError(f"--chains must be at least 2 for r_hat, got {chains}")
+    run_dir = Path(run_dir)
+    resolved, env, agent, _ = load_run(run_dir)
+    env.close()
+    if not (hasattr(agent, "filter") and hasattr(agent.filter, "critic")):
+        raise RunError(f"{run_dir}: agent {resolved['agent']!r} has no sub-goal critic to diagnose; "
+                       "train with --agent hubsgo")
+    critic = agent.filter.critic
+    names = list(critic.names)
+    out = Path(out) if out else run_dir / "diagnostics"
+    out.mkdir(parents=True, exist_ok=True)
+
+    samples = critic.sample(draws, num_chains=chains, burn_in=burn_in)          # (chains, draws, N)
+    log_q = critic.log_q(samples.reshape(-1, len(names))).reshape(chains, draws)
+    edges = [(u, v) for u, v, _ in critic.graph.edges]
+    idata = to_inference_data(samples, names, log_q=log_q, edges=edges or None)
+    table = summary(idata)
+    paths: dict[str, Path] = {}
+    from ..experiments.io import write_text
+
+    paths["summary"] = write_text(out / "summary.csv", table.to_csv())
+    paths["trace"] = plot_trace(idata, out / "trace.png")
+    paths["forest"] = plot_forest(idata, out / "forest.png")
+    paths["posterior"] = plot_posterior(idata, out / "posterior.png")
+    factors = critic.factors()
+    paths["mrf_graph"] = plot_mrf_graph(names, critic.marginals().detach().numpy(), edges,
+                                        factors["pairwise"], out / "mrf_graph.png",
+                                        title=f"learned critic: {resolved['task']} ({resolved.get('model', '')})")
+    rows = read_csv_rows(run_dir / "critic_history.csv")
+    if rows:
+        steps = np.array([float(r["env_steps"]) for r in rows])
+        marg = np.array([[float(r[n]) for n in names] for r in rows])
+        paths["marginals"] = plot_marginals_history(steps, marg, names, out / "marginals.png")
+    paths["netcdf"] = save_netcdf(idata, out / "posterior.nc")
+    return {"summary": table, "paths": paths, "chains": chains, "draws": draws}

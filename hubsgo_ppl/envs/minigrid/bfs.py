@@ -1,0 +1,216 @@
+"""Optimal plans for a maze by breadth-first search over its full symbolic state.
+
+The state is (x, y, direction, carried object, cells of the carriable objects, door states), see
+:class:`~hubsgo_ppl.envs.minigrid.layout.MazeState`; the moves are the task's own action subset with
+MiniGrid's rules (keys open locked doors of their colour, one object carried at a time, doors and
+objects block the way, goal and lava end the episode). Every action costs one step, so BFS gives
+the fewest steps, and with MiniGrid's reward ``1 - 0.9 * steps / max_steps`` the best return.
+Used for acceptance checks (greedy return >= 0.85 x :func:`optimal_return`) and scripted tests.
+
+    >>> from hubsgo_ppl.envs.minigrid.bfs import optimal_steps
+    >>> optimal_steps("keydoor")
+    19
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import replace
+from pathlib import Path
+from typing import Any, Callable
+
+from ...specs import SpecError
+from ..subgoals import Catalogue
+from .layout import MazeSpec, MazeState, load_maze_spec
+
+__all__ = ["plan", "optimal_steps", "optimal_return", "transition", "holds"]
+
+_DIR_VEC = ((1, 0), (0, 1), (-1, 0), (0, -1))
+MAX_STATES = 2_000_000
+
+
+class _Maze:
+    """Static lookup tables of a spec, so each BFS expansion is a few dict/set probes."""
+
+    def __init__(self, spec: MazeSpec):
+        lay = spec.layout
+        self.spec = spec
+        self.walls = lay.walls
+        self.lava = lay.lava
+        self.goal = lay.goal
+        self.door_at = {d.cell: j for j, d in enumerate(lay.doors)}
+        self.door_color = tuple(d.color for d in lay.doors)
+        self.carriables = tuple((o.type, o.color) for o in lay.carriables)
+        self.actions = tuple(spec.options.actions)
+
+
+def transition(spec_or_maze: MazeSpec | _Maze, s: MazeState, action: str) -> MazeState:
+    """MiniGrid's step on the symbolic state for one named action (``left``, ``forward``, ...)."""
+    m = spec_or_maze if isinstance(spec_or_maze, _Maze) else _Maze(spec_or_maze)
+    x, y = s.pos
+    if action == "left":
+        return s._replace(dir=(s.dir - 1) % 4)
+    if action == "right":
+        return s._replace(dir=(s.dir + 1) % 4)
+    dx, dy = _DIR_VEC[s.dir]
+    front = (x + dx, y + dy)
+    door = m.door_at.get(front)
+    obj = s.objects.index(front) if front in s.objects else -1
+    if action == "forward":
+        blocked = front in m.walls or obj >= 0 or (door is not None and s.doors[door] != 2)
+        return s if blocked else s._replace(pos=front)
+    if action == "pickup":
+        if obj >= 0 and s.carrying < 0:
+            objects = tuple(None if j == obj else c for j, c in enumerate(s.objects))
+            return s._replace(carrying=obj, objects=objects)
+        return s
+    if action == "drop":
+        empty = (front not in m.walls and door is None and obj < 0 and front != m.goal
+                 and front not in m.lava)
+        if empty and s.carrying >= 0:
+            objects = tuple(front if j == s.carrying else c for j, c in enumerate(s.objects))
+            return s._replace(carrying=-1, objects=objects)
+        return s
+    if action == "toggle":
+        if door is None:
+            return s
+        state = s.doors[door]
+        if state == 0:
+            key = ("key", m.door_color[door])
+            if s.carrying < 0 or m.carriables[s.carrying] != key:
+                return s
+            new = 2
+        else:
+            new = 1 if state == 2 else 2
+        return s._replace(doors=tuple(new if j == door else d for j, d in enumerate(s.doors)))
+    if action == "done":
+        return s
+    raise ValueError(f"unknown action {action!r}")
+
+
+def holds(spec: MazeSpec, s: MazeState, subgoal: int) -> bool:
+    """Whether catalogue sub-goal ``subgoal`` holds in ``s`` (the same test as the env's)."""
+    p = spec.predicates[subgoal]
+    if p.kind in ("at", "goal"):
+        return s.pos == p.target
+    if p.kind == "carrying":
+        lay = spec.layout
+        return s.carrying >= 0 and (lay.carriables[s.carrying].type,
+                                    lay.carriables[s.carrying].color) == spec.carry_kinds[p.index]
+    return s.doors[p.index] == 2
+
+
+def _resolve(source: Any, start_dir: int | None) -> tuple[MazeSpec, list[MazeState], int]:
+    """(spec, start states, steps already taken) for an env or a catalogue/task name/spec."""
+    env = getattr(source, "unwrapped", None)
+    if env is not None and hasattr(env, "symbolic_state"):
+        if env.agent_pos is None or env.agent_dir is None or env.agent_dir < 0:
+            raise ValueError("the env has not been reset; call env.reset(seed=...) before planning")
+        if start_dir is not None:
+            raise ValueError("start_dir is only for catalogues; an env plans from its current state")
+        spec = env.spec_maze
+        if env.max_steps != spec.max_steps:  # a max_steps= override changes the return
+            spec = replace(spec, max_steps=env.max_steps)
+        return spec, [env.symbolic_state()], int(env.step_count)
+    if isinstance(source, MazeSpec):
+        spec = source
+    elif isinstance(source, Catalogue):
+        spec = load_maze_spec(source)
+    else:
+        p = Path(source)
+        if p.suffix not in (".yaml", ".yml"):
+            from .. import get_task  # a task name: resolved by the registry, above this module
+            p = get_task(str(source)).catalogue_path
+        spec = load_maze_spec(p)
+    if start_dir is not None:
+        if start_dir not in (0, 1, 2, 3):
+            raise ValueError(f"start_dir={start_dir!r}; use 0 (right), 1 (down), 2 (left) or 3 (up)")
+        dirs = [start_dir]
+    elif spec.options.start_dir == "random":
+        dirs = [0, 1, 2, 3]
+    else:
+        dirs = [{"right": 0, "down": 1, "left": 2, "up": 3}[spec.options.start_dir]]
+    return spec, [spec.initial_state(d) for d in dirs], 0
+
+
+def _bfs(spec: MazeSpec, start: MazeState, done: Callable[[MazeState], bool]) -> list[int] | None:
+    m = _Maze(spec)
+    if done(start):
+        return []
+    parent: dict[MazeState, tuple[MazeState, int] | None] = {start: None}
+    frontier = deque([start])
+    terminal = m.lava | {m.goal}
+    while frontier:
+        s = frontier.popleft()
+        if s.pos in terminal:  # the episode ended here
+            continue
+        for a, name in enumerate(m.actions):
+            t = transition(m, s, name)
+            if t in parent:
+                continue
+            parent[t] = (s, a)
+            if done(t):
+                path = []
+                while parent[t] is not None:
+                    t, act = parent[t]
+                    path.append(act)
+                return path[::-1]
+            frontier.append(t)
+        if len(parent) > MAX_STATES:
+            raise RuntimeError(f"{spec.source}: BFS visited over {MAX_STATES} states; the maze is too "
+                               f"large to plan exactly")
+    return None
+
+
+def _target(spec: MazeSpec, subgoal: str | int | None) -> Callable[[MazeState], bool]:
+    if subgoal is None:
+        goal = spec.layout.goal
+        return lambda s: s.pos == goal
+    names = spec.subgoal_names
+    if isinstance(subgoal, str):
+        if subgoal not in names:
+            raise SpecError(f"{spec.source}: no sub-goal {subgoal!r}; use one of: {', '.join(names)}")
+        idx = names.index(subgoal)
+    else:
+        idx = int(subgoal)
+        if not 0 <= idx < len(names):
+            raise IndexError(f"sub-goal index {subgoal} out of range; the task has {len(names)}: {names}")
+    return lambda s: holds(spec, s, idx)
+
+
+def plan(source: Any, subgoal: str | int | None = None, start_dir: int | None = None) -> list[int]:
+    """Shortest action sequence (indices into the task's action space) to the goal, or until the
+    named sub-goal first holds.
+
+    ``source`` is a reset :class:`MazeEnv` (plans from its current state), a task name, a catalogue
+    path, a :class:`Catalogue` or a :class:`MazeSpec` (plans from the start). A task whose start
+    direction is random needs ``start_dir``. Raises ``ValueError`` if the target is unreachable.
+    """
+    spec, starts, _ = _resolve(source, start_dir)
+    if len(starts) > 1:
+        raise ValueError(f"{spec.source}: the start direction is random (options.start_dir); pass "
+                         f"start_dir=0..3 or plan from a reset env")
+    path = _bfs(spec, starts[0], _target(spec, subgoal))
+    if path is None:
+        what = "the goal" if subgoal is None else f"sub-goal {subgoal!r}"
+        raise ValueError(f"{spec.source}: {what} is unreachable from {starts[0]}")
+    return path
+
+
+def optimal_steps(source: Any, start_dir: int | None = None) -> int:
+    """Fewest steps to the goal (see :func:`plan` for ``source`` and ``start_dir``)."""
+    return len(plan(source, start_dir=start_dir))
+
+
+def optimal_return(source: Any, start_dir: int | None = None) -> float:
+    """Best achievable episode return, ``1 - 0.9 * (steps_taken + steps) / max_steps`` (0 if the goal
+    cannot be reached in time). For a random start direction (and no ``start_dir``) it is the mean
+    over the four equally likely directions, i.e. the expected optimal return."""
+    spec, starts, taken = _resolve(source, start_dir)
+    goal = spec.layout.goal
+    values = []
+    for s in starts:
+        path = _bfs(spec, s, lambda t: t.pos == goal)
+        n = None if path is None else taken + len(path)
+        values.append(0.0 if n is None or n > spec.max_steps else 1.0 - 0.9 * n / spec.max_steps)
+    return float(sum(values) / len(values))

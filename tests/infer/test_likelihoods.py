@@ -1,0 +1,56 @@
+import math
+
+import pytest
+import torch
+
+from hubsgo_ppl.infer.likelihoods import LIKELIHOODS, Likelihood, get_likelihood, register_likelihood
+
+R = torch.tensor([-2.0, -0.5, 0.0, 1.0, 3.0])
+
+
+def test_gaussian_is_minus_td_loss_plus_constant():
+    # Eq. 4: log p(y | w) = -1/2 (y - Q)^2 + const = -L_G + const for scale 1.
+    lp = get_likelihood("gaussian").distribution(R).log_prob(torch.zeros(5))
+    assert torch.allclose(lp, -0.5 * R**2 - 0.5 * math.log(2 * math.pi))
+    lp2 = get_likelihood("gaussian", scale=2.0).distribution(R).log_prob(torch.zeros(5))
+    assert torch.allclose(lp2, -R**2 / 8 - math.log(2.0) - 0.5 * math.log(2 * math.pi))
+
+
+def test_student_t_and_laplace_values():
+    lap = get_likelihood("laplace", scale=0.5).distribution(R).log_prob(torch.zeros(5))
+    assert torch.allclose(lap, -R.abs() / 0.5 - math.log(2 * 0.5))
+    t = get_likelihood("student_t", df=3.0, scale=1.0).distribution(R).log_prob(torch.zeros(5))
+    c = math.lgamma(2.0) - math.lgamma(1.5) - 0.5 * math.log(3 * math.pi)
+    assert torch.allclose(t, c - 2.0 * torch.log1p(R**2 / 3), atol=1e-5)
+    # heavier tails: a huge residual costs less than under the Gaussian
+    big = torch.tensor([10.0])
+    heavy = get_likelihood("student_t").distribution(big).log_prob(torch.zeros(1))
+    assert heavy > get_likelihood("gaussian").distribution(big).log_prob(torch.zeros(1))
+
+
+@pytest.mark.parametrize(
+    "name, params, match",
+    [
+        ("gaussian", {"scale": 0}, "scale must be > 0"),
+        ("gaussian", {"scale": -1}, "scale must be > 0"),
+        ("student_t", {"df": -3}, "df must be > 0"),
+        ("laplace", {"sigma": 1}, "unknown parameter.*accepted: scale"),
+        ("cauchy", {}, "registered: gaussian, laplace, student_t"),
+    ],
+)
+def test_bad_likelihoods(name, params, match):
+    with pytest.raises(ValueError, match=match):
+        get_likelihood(name, **params)
+
+
+def test_user_registered_likelihood():
+    @register_likelihood("wide_gaussian_test")
+    class Wide(Likelihood):
+        def distribution(self, loc):
+            return get_likelihood("gaussian", scale=10.0).distribution(loc)
+
+    try:
+        assert "wide_gaussian_test" in LIKELIHOODS
+        assert get_likelihood("wide_gaussian_test").distribution(R).batch_shape == (5,)
+    finally:
+        LIKELIHOODS.pop("wide_gaussian_test")

@@ -1,0 +1,72 @@
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from hubsgo_ppl.infer.critic import SubgoalCritic
+from hubsgo_ppl.specs import ModelSpec, SpecError, list_model_specs, load_model_spec
+
+BASE = {
+    "name": "t",
+    "subgoals": ["a", "b", "c"],
+    "graph": "specific",
+    "edges": [["a", "b", "positive"], ["b", "c", "negative"]],
+    "prior": {"name": "bernoulli", "p": 0.5},
+    "likelihood": {"name": "gaussian", "scale": 1.0},
+    "inference": {"lr": 0.05, "burn_in": 32, "num_samples": 64, "kernel": "single_site", "baseline_beta": 0.9},
+}
+
+
+def write(tmp_path, **changes):
+    data = {**BASE, **changes}
+    path = tmp_path / "spec.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def test_valid_spec_builds_a_critic(tmp_path):
+    spec = load_model_spec(write(tmp_path))
+    assert isinstance(spec, ModelSpec) and spec.edges[1] == ("b", "c", "negative")
+    critic = SubgoalCritic.from_spec(spec, seed=0)
+    assert critic.factors()["pairwise"] == {("a", "b"): 1.0, ("b", "c"): -1.0}
+    assert load_model_spec(write(tmp_path), graph="independent").graph == "independent"
+
+
+@pytest.mark.parametrize(
+    "changes, key, fix",
+    [
+        ({"sigma": 1.0}, "sigma", "unknown key; remove it"),
+        ({"inference": {"lr": 0.1, "burnin": 3}}, "inference.burnin", "unknown key"),
+        ({"edges": [["a", "z", "positive"]]}, "edges[0]", "'z' is not a sub-goal; use one of: a, b, c"),
+        ({"subgoals": ["a", "b", "a"], "edges": []}, "subgoals", "duplicate name 'a'"),
+        ({"likelihood": {"name": "gaussian", "scale": -1.0}}, "likelihood", "scale must be > 0"),
+        ({"likelihood": {"name": "gaussian", "scale": 0}}, "likelihood", "scale must be > 0"),
+        ({"subgoals": [], "edges": []}, "subgoals", "N = 0"),
+        ({"prior": {"name": "dirichlet"}}, "prior", "registered: bernoulli, beta_bernoulli, ising"),
+        ({"likelihood": {"name": "cauchy"}}, "likelihood", "registered: gaussian, laplace, student_t"),
+        ({"edges": [["a", "b", "strong"]]}, "edges[0][2]", "positive"),
+        ({"graph": "dense"}, "graph", "fully_connected"),
+    ],
+)
+def test_spec_errors_name_file_key_and_fix(tmp_path, changes, key, fix):
+    path = write(tmp_path, **changes)
+    with pytest.raises(SpecError) as err:
+        load_model_spec(path)
+    msg = str(err.value)
+    assert str(path) in msg and key in msg and fix in msg, msg
+
+
+def test_missing_spec_lists_builtins():
+    with pytest.raises(SpecError, match="example-specific"):
+        load_model_spec("no-such-spec")
+
+
+def test_builtin_spec_loads_by_name_from_any_cwd(tmp_path):
+    assert "example-specific" in list_model_specs()
+    code = "from hubsgo_ppl.specs import load_model_spec; print(load_model_spec('example-specific').name)"
+    out = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True,
+                         env={"PYTHONPATH": str(Path(__file__).resolve().parents[1])})
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "example-specific"
