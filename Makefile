@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 PIP := $(BIN)/python -m pip
 EXTRAS ?= robosuite,ray,notebooks,dev
 STAMP := $(VENV)/.installed
-PYTEST_ARGS ?= -m "not slow and not gpu"
+PYTEST_ARGS ?= -m "not slow and not gpu" --nbmake --nbmake-timeout=600 tests notebooks
 
 .PHONY: install demo test test-all bench clean
 
@@ -28,7 +28,7 @@ test: $(STAMP)
 	$(BIN)/python -m pytest $(PYTEST_ARGS)
 
 test-all: $(STAMP)
-	$(BIN)/python -m pytest -m "not gpu"
+	$(BIN)/python -m pytest -m "not gpu" --nbmake tests notebooks
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/critic.py

@@ -1,4 +1,4 @@
-"""Where the shipped data lives: ``models/`` (critic specs) and ``envs/`` (task catalogues, layouts).
+"""Where the shipped data lives: ``models/`` (critic specs), ``envs/`` (task catalogues, layouts), ``sweeps/``.
 
 In a source checkout these are the top-level folders; after ``pip install .`` they ship inside the
 package as ``hubsgo_ppl._models`` and ``hubsgo_ppl._envs`` (see ``[tool.setuptools]`` in pyproject).
@@ -9,7 +9,7 @@ from __future__ import annotations
 import importlib.util
 from pathlib import Path
 
-__all__ = ["models_dir", "envs_dir"]
+__all__ = ["models_dir", "envs_dir", "sweeps_dir"]
 
 _REPO_ROOT = Path(__file__).resolve().parent.parent
 
@@ -32,3 +32,8 @@ def models_dir() -> Path:
 def envs_dir() -> Path:
     """Folder of the built-in task catalogues (``*.yaml``) and their layouts/assets."""
     return _shipped("hubsgo_ppl._envs", "envs")
+
+
+def sweeps_dir() -> Path:
+    """Folder of the shipped sweep grids (``*.yaml``)."""
+    return _shipped("hubsgo_ppl._sweeps", "sweeps")

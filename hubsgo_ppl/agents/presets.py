@@ -12,10 +12,10 @@ PRESETS: dict[str, dict[str, Any]] = {
         "steps": 150_000,
         "low_level": "learned",
         "env": {},                      # keyword arguments of the env, e.g. max_steps
-        "loop": {"option_steps": 30, "explore_fraction": 0.3, "low_explore_fraction": 0.3,
+        "loop": {"option_steps": 10, "explore_fraction": 0.3, "low_explore_fraction": 0.3,
                  "filter_fraction": 0.5},
         "high": {"hidden": [128, 128], "lr": 1e-3, "batch_size": 64},
-        "low": {"hidden": [256, 256], "lr": 5e-4, "batch_size": 128, "learning_starts": 1000},
+        "low": {"hidden": [128, 128], "lr": 5e-4, "batch_size": 128, "learning_starts": 1000},
         # flat baselines (Stable-Baselines3 keyword arguments; agents/flat.py). dqn and ddqn share "dqn".
         "dqn": {"learning_rate": 5e-4, "buffer_size": 100_000, "learning_starts": 1000, "batch_size": 64,
                 "train_freq": 4, "target_update_interval": 1000, "exploration_fraction": 0.3,

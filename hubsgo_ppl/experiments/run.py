@@ -238,10 +238,10 @@ def train(cfg: RunConfig, out: str | Path, resume: bool = False, progress: bool 
             if agent.episodes // int(resolved["checkpoint_every"]) > last_ckpt:   # crossed a multiple
                 last_ckpt = agent.episodes // int(resolved["checkpoint_every"])
                 _save(out, resolved, agent, wall0 + time.perf_counter() - t0)
-            if bar is not None:
+            if bar is not None and recent:
                 bar.update(min(agent.env_steps, total) - min(before, total))
-                post = {"ret": f"{np.mean([r for r, _ in recent]):.2f}" if recent else "-",
-                        "succ": f"{np.mean([s for _, s in recent]):.2f}" if recent else "-",
+                post = {"ret": f"{np.mean([r for r, _ in recent]):.2f}",
+                        "succ": f"{np.mean([s for _, s in recent]):.2f}",
                         "eps": f"{stats.filter_eps:.2f}"}
                 if "critic/loss" in stats.scalars:
                     post["critic"] = f"{stats.scalars['critic/loss']:.3g}"

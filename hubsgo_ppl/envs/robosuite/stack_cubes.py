@@ -1,0 +1,108 @@
+"""StackCubes: stack the red cube on the target pad, then the green cube on the red one (Sec. 4)."""
+
+from __future__ import annotations
+
+from robosuite.models.objects import BoxObject
+from robosuite.models.tasks import ManipulationTask
+from robosuite.utils.placement_samplers import UniformRandomSampler
+
+from .base import SubgoalManipulationEnv
+
+__all__ = ["StackCubes"]
+
+
+class StackCubes(SubgoalManipulationEnv):
+    """
+    ## Description
+
+    A Panda arm faces a table with a red and a green cube (4 cm) and a grey target pad. The task is
+    solved when the red cube rests on the pad and the green cube rests on the red one, both released.
+    Stacking in the other order does not count. The task has dependency relations: a cube must be
+    grasped before it can be moved, and the lower (red) cube must be placed before the upper one.
+    robosuite's ``Stack`` is the closest built-in; this task adds the pad and the ordering.
+
+    ## Action Space
+
+    ``Box(-1, 1, (4,), float32)``: OSC_POSITION end-effector displacement (x, y, z; 1 is about 1 cm
+    per step at 20 Hz) and the gripper command (-1 open, +1 closed). The gripper stays pointing down.
+
+    ## Observation
+
+    Flat ``float32`` vector (32): end-effector position (3) and quaternion (4), finger joints (2),
+    red cube position (3) and quaternion (4), green cube position and quaternion (7), pad position (3),
+    and the end-effector-to-cube vectors (3 + 3).
+
+    ## Rewards
+
+    Sparse: 1 on the step the stack is complete, else 0.
+
+    ## Termination
+
+    Terminated on success; truncated after ``horizon`` control steps (default 400).
+
+    ## Randomisation (seeded by ``reset(seed=...)``)
+
+    Cube positions: ``UniformRandomSampler`` over x in [-0.14, 0.02], y in [-0.16, 0.16] relative to
+    the table centre, no rotation (OSC_POSITION cannot turn the hand), non-overlapping. The pad's
+    centre is drawn uniformly in x in [0.08, 0.14], y in [-0.08, 0.08]. Pass ``placement_initializer``
+    to swap the cube sampler.
+
+    ## Sub-goal catalogue (``envs/stack_cubes.yaml``)
+
+    | name | kind | achieved when |
+    |---|---|---|
+    | reach_above_red | reach_above | hand within 2 cm of 8 cm above the red cube |
+    | grasp_red | grasp | both finger pads touch the red cube |
+    | place_red_on_target | place_on | red cube released, centred on the pad |
+    | reach_above_green | reach_above | hand within 2 cm of 8 cm above the green cube |
+    | grasp_green | grasp | both finger pads touch the green cube |
+    | place_green_on_red | place_on | green cube released, centred on the red cube |
+    | place_green_on_target | place_on | (wrong order) green cube on the pad |
+    | place_red_on_green | place_on | (wrong order) red cube on the green cube |
+
+    G* (the dependency chain): grasp_red -> place_red_on_target -> grasp_green -> place_green_on_red.
+
+    ## Registered Configurations
+
+    - ``hubsgo/StackCubes-v0`` (``hubsgo_ppl.envs.make("stack_cubes")``)
+    """
+
+    cube_half = 0.02
+    pad_x_range = (0.08, 0.14)
+    pad_y_range = (-0.08, 0.08)
+
+    def _load_model(self):
+        arena = self._load_table()
+        self.red = BoxObject(name="red", size=[self.cube_half] * 3, rgba=[1, 0, 0, 1], friction=(1.0, 5e-3, 1e-4))
+        self.green = BoxObject(name="green", size=[self.cube_half] * 3, rgba=[0, 1, 0, 1], friction=(1.0, 5e-3, 1e-4))
+        self.objects = {"red": self.red, "green": self.green}
+        self.locations = {}
+        self._add_location(arena, "target", (0.11, 0.0), rgba=(0.5, 0.5, 0.5, 1))
+        cubes = [self.red, self.green]
+        if self.placement_initializer is not None:
+            self.placement_initializer.reset()
+            self.placement_initializer.add_objects(cubes)
+        else:
+            self.placement_initializer = UniformRandomSampler(
+                name="CubeSampler", mujoco_objects=cubes, x_range=[-0.14, 0.02], y_range=[-0.16, 0.16],
+                rotation=0.0, ensure_object_boundary_in_range=False, ensure_valid_placement=True,
+                reference_pos=self.table_offset, z_offset=0.002, rng=self.rng)
+        self.model = ManipulationTask(mujoco_arena=arena, mujoco_robots=[r.robot_model for r in self.robots],
+                                      mujoco_objects=cubes)
+
+    def _reset_internal(self):
+        super()._reset_internal()
+        self._reset_objects()
+        self._move_location("target", (self.rng.uniform(*self.pad_x_range), self.rng.uniform(*self.pad_y_range)))
+
+    def _setup_observables(self):
+        observables = super()._setup_observables()
+        observables.update(self._object_sensors(["red", "green"], with_quat=True))
+        observables.update(self._location_sensors(["target"]))
+        observables.update(self._eef_to_sensors(["red", "green"]))
+        return observables
+
+    def _check_success(self) -> bool:
+        """Red on the pad, green on red, both released."""
+        contacts = self.contacts()
+        return self.is_placed_on("red", "target", contacts) and self.is_placed_on("green", "red", contacts)

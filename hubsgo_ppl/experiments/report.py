@@ -1,0 +1,274 @@
+"""The sweep report: the paper's Tables 1 and 2, learning curves (Figs. 6, 7, 9) and a CSV of every number.
+
+Statistic (as in the paper's tables): for each run, the **average episodic return over training** (the
+mean of ``return`` over every row of its ``metrics.csv``); for each (variant, task) cell, the mean of
+those averages across seeds ± their standard error ``std(ddof=1) / sqrt(n)``.
+
+Curves: each run's episodes are binned by ``env_steps`` (``bins`` equal bins up to the task's largest
+step count); a run's value in a bin is the mean return of its episodes ending there (carried forward
+through bins where no episode ended); the band is ± one standard error across seeds.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from .io import atomic_write, write_text
+from .logger import read_csv_rows
+
+__all__ = ["RunSummary", "Cell", "PAPER", "collect", "aggregate", "markdown_table", "curves", "write_report"]
+
+#: The paper's reported numbers (mean, s.e.) by table, row label and task.
+PAPER: dict[str, dict[str, dict[str, tuple[float, float]]]] = {
+    "table1": {
+        "HUBS-GO (specific correlations)": {"fourroom": (0.8904, 0.0044), "keydoor": (0.8763, 0.0053),
+                                            "stack_cubes": (0.8891, 0.0152), "push_any_one": (0.9173, 0.0123),
+                                            "collect_three_balls": (0.9627, 0.0099)},
+        "HUBS-GO (fully connected)": {"fourroom": (0.8416, 0.0879), "keydoor": (0.8580, 0.0999),
+                                      "stack_cubes": (0.8563, 0.1026), "push_any_one": (0.9095, 0.0125),
+                                      "collect_three_balls": (0.9370, 0.0190)},
+        "HUBS-GO (fully independent)": {"fourroom": (0.7114, 0.1196), "keydoor": (0.7425, 0.0723),
+                                        "stack_cubes": (0.8209, 0.1072), "push_any_one": (0.8744, 0.1154),
+                                        "collect_three_balls": (0.8467, 0.1380)},
+        "DDQN": {"fourroom": (0.1899, 0.0077), "keydoor": (0.2107, 0.0109)},
+        "PPO": {"fourroom": (0.6664, 0.0083), "keydoor": (0.7567, 0.0084), "stack_cubes": (0.3934, 0.0068),
+                "push_any_one": (0.3337, 0.0114), "collect_three_balls": (0.3122, 0.0116)},
+        "TD3": {"stack_cubes": (0.4890, 0.0045), "push_any_one": (0.6903, 0.0144),
+                "collect_three_balls": (0.6407, 0.0159)},
+        "hDQN": {"fourroom": (0.4287, 0.0166), "keydoor": (0.4584, 0.0126)},
+        "HIRO": {"fourroom": (0.8250, 0.0054), "keydoor": (0.8332, 0.0064), "stack_cubes": (0.7820, 0.0141),
+                 "push_any_one": (0.8730, 0.0094), "collect_three_balls": (0.8514, 0.0193)},
+    },
+    "table2": {
+        "HUBS-GO (specific sub-goals)": {"fourroom": (0.8904, 0.0044), "keydoor": (0.8763, 0.0053)},
+        "HUBS-GO (incorrect sub-goals)": {"fourroom": (0.7629, 0.0163), "keydoor": (0.7274, 0.0123)},
+        "h-DQN (specific sub-goals)": {"fourroom": (0.4287, 0.0166), "keydoor": (0.4584, 0.0126)},
+        "h-DQN (incorrect sub-goals)": {"fourroom": (0.2438, 0.0068), "keydoor": (0.1430, 0.0072)},
+        "HIRO": {"fourroom": (0.8250, 0.0054), "keydoor": (0.8332, 0.0064)},
+    },
+}
+
+
+@dataclass
+class RunSummary:
+    task: str
+    variant: str
+    seed: int
+    episodes: int
+    env_steps: int
+    avg_return: float
+    final_return: float          # mean return over the last 10% of episodes
+    success_rate: float
+    steps: np.ndarray            # per episode
+    returns: np.ndarray
+
+
+@dataclass
+class Cell:
+    task: str
+    variant: str
+    n: int
+    mean: float
+    se: float                    # nan when n < 2
+
+
+def _layout(sweep_dir: Path) -> tuple[list[str], list[str], dict[str, str], str | None]:
+    """(tasks, variants, labels, table) from ``sweep.yaml`` if present, else from the folder tree."""
+    meta = sweep_dir / "sweep.yaml"
+    if meta.is_file():
+        spec = yaml.safe_load(meta.read_text())
+        tasks = [t["name"] for t in spec["tasks"]]
+        variants = [v["name"] for v in spec["variants"]]
+        labels = {v["name"]: v.get("label") or v["name"] for v in spec["variants"]}
+        return tasks, variants, labels, spec.get("table")
+    tasks = sorted(p.name for p in sweep_dir.iterdir() if p.is_dir() and p.name != "report")
+    variants = sorted({v.name for t in tasks for v in (sweep_dir / t).iterdir() if v.is_dir()})
+    return tasks, variants, {v: v for v in variants}, None
+
+
+def collect(sweep_dir: str | Path) -> list[RunSummary]:
+    """Every run with a non-empty ``metrics.csv`` under ``SWEEP_DIR/<task>/<variant>/seed<k>``."""
+    sweep_dir = Path(sweep_dir)
+    out = []
+    for metrics in sorted(sweep_dir.glob("*/*/seed*/metrics.csv")):
+        rows = read_csv_rows(metrics)
+        if not rows:
+            continue
+        run = metrics.parent
+        try:
+            rets = np.array([float(r["return"]) for r in rows])
+            steps = np.array([float(r["env_steps"]) for r in rows])
+            succ = np.array([float(r["success"]) for r in rows])
+            seed = int(run.name[len("seed"):])
+        except (KeyError, ValueError) as exc:
+            raise ValueError(f"{metrics}: not a metrics file of `hubsgo train` ({exc}); "
+                             "expected columns episode, env_steps, return, success") from None
+        tail = rets[-max(1, len(rets) // 10):]
+        out.append(RunSummary(run.parent.parent.name, run.parent.name, seed, len(rows), int(steps[-1]),
+                              float(rets.mean()), float(tail.mean()), float(succ.mean()), steps, rets))
+    return out
+
+
+def aggregate(runs: list[RunSummary]) -> dict[tuple[str, str], Cell]:
+    """(variant, task) -> mean ± s.e. across seeds of the per-run average returns."""
+    groups: dict[tuple[str, str], list[float]] = {}
+    for r in runs:
+        groups.setdefault((r.variant, r.task), []).append(r.avg_return)
+    cells = {}
+    for (variant, task), vals in groups.items():
+        a = np.asarray(vals)
+        se = float(a.std(ddof=1) / math.sqrt(a.size)) if a.size > 1 else float("nan")
+        cells[(variant, task)] = Cell(task, variant, int(a.size), float(a.mean()), se)
+    return cells
+
+
+def _fmt(mean: float, se: float) -> str:
+    return f"{mean:.4f} ± {se:.4f}" if math.isfinite(se) else f"{mean:.4f} (n=1)"
+
+
+def markdown_table(cells: dict[tuple[str, str], Cell], tasks: list[str], variants: list[str],
+                   labels: dict[str, str], title: str) -> str:
+    lines = [f"**{title}**", "", "| Algorithm | " + " | ".join(tasks) + " |",
+             "|---|" + "---|" * len(tasks)]
+    for v in variants:
+        row = [_fmt(cells[(v, t)].mean, cells[(v, t)].se) if (v, t) in cells else "-" for t in tasks]
+        if any(c != "-" for c in row):
+            lines.append(f"| {labels.get(v, v)} | " + " | ".join(row) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _paper_table(table: str, tasks: list[str], variants: list[str], labels: dict[str, str]) -> str:
+    ref = PAPER[table]
+    lines = [f"**The paper's {table.replace('table', 'Table ')} (same rows and columns)**", "",
+             "| Algorithm | " + " | ".join(tasks) + " |", "|---|" + "---|" * len(tasks)]
+    for v in variants:
+        label = labels.get(v, v)
+        if label in ref:
+            lines.append(f"| {label} | " + " | ".join(_fmt(*ref[label][t]) if t in ref[label] else "-"
+                                                     for t in tasks) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def curves(runs: list[RunSummary], task: str, variants: list[str], bins: int = 40
+           ) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """variant -> (bin centres, mean, s.e.) of the binned learning curves on ``task``."""
+    mine = [r for r in runs if r.task == task]
+    if not mine:
+        return {}
+    hi = max(r.steps.max() for r in mine)
+    edges = np.linspace(0.0, hi, bins + 1)
+    centres = (edges[:-1] + edges[1:]) / 2
+    out = {}
+    for v in variants:
+        per_run = []
+        for r in (r for r in mine if r.variant == v):
+            idx = np.clip(np.searchsorted(edges, r.steps, side="left") - 1, 0, bins - 1)
+            sums, counts = np.bincount(idx, r.returns, bins), np.bincount(idx, minlength=bins)
+            vals = np.full(bins, np.nan)
+            vals[counts > 0] = sums[counts > 0] / counts[counts > 0]
+            for i in range(1, bins):           # carry forward through bins where no episode ended
+                if np.isnan(vals[i]):
+                    vals[i] = vals[i - 1]
+            per_run.append(vals)
+        if not per_run:
+            continue
+        a = np.vstack(per_run)
+        ok = np.isfinite(a)                 # a run has no value before its first episode ends
+        n = ok.sum(0)
+        filled = np.where(ok, a, 0.0)
+        mean = np.where(n > 0, filled.sum(0) / np.maximum(n, 1), np.nan)
+        ss = np.where(ok, (a - mean) ** 2, 0.0).sum(0)
+        se = np.where(n > 1, np.sqrt(ss / np.maximum(n - 1, 1)) / np.sqrt(np.maximum(n, 1)), 0.0)
+        out[v] = (centres, mean, se)
+    return out
+
+
+def _plot(task: str, data: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]], labels: dict[str, str],
+          path: Path) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for i, (v, (x, m, se)) in enumerate(data.items()):
+        ax.plot(x, m, color=f"C{i % 10}", lw=1.8, label=labels.get(v, v))
+        ax.fill_between(x, m - se, m + se, color=f"C{i % 10}", alpha=0.2, lw=0)
+    ax.set_xlabel("environment steps")
+    ax.set_ylabel("episodic return")
+    ax.set_title(f"{task}: mean ± s.e. across seeds")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    atomic_write(path, lambda fh: fig.savefig(fh, format="png", dpi=110))
+    plt.close(fig)
+    return path
+
+
+def _csv(rows: list[dict[str, Any]]) -> str:
+    fields: list[str] = []
+    for r in rows:
+        fields += [k for k in r if k not in fields]
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=fields)
+    w.writeheader()
+    w.writerows(rows)
+    return buf.getvalue()
+
+
+def write_report(sweep_dir: str | Path, out: str | Path | None = None, bins: int = 40) -> dict[str, Path]:
+    """Write ``results.md`` (tables), ``results.csv`` (per run and aggregated), ``curves.csv`` and one
+    ``curve_<task>.png`` per task into ``out`` (default ``SWEEP_DIR/report``). Returns the paths."""
+    sweep_dir = Path(sweep_dir)
+    if not sweep_dir.is_dir():
+        raise FileNotFoundError(f"{sweep_dir}: no such sweep directory; pass the --out folder of `hubsgo sweep`")
+    runs = collect(sweep_dir)
+    if not runs:
+        raise FileNotFoundError(f"{sweep_dir}: no runs with metrics (expected <task>/<variant>/seed<k>/metrics.csv); "
+                                "run `hubsgo sweep` first")
+    tasks, variants, labels, table = _layout(sweep_dir)
+    tasks += sorted({r.task for r in runs} - set(tasks))
+    variants += sorted({r.variant for r in runs} - set(variants))
+    out = Path(out) if out is not None else sweep_dir / "report"
+    out.mkdir(parents=True, exist_ok=True)
+    cells = aggregate(runs)
+    title = {"table1": "Table 1", "table2": "Table 2"}.get(table or "", "Table")
+    md = [f"# Report of sweep `{sweep_dir}`", "",
+          "Cell: the average episodic return over training of each run, then mean ± standard error "
+          "across seeds.", "", markdown_table(cells, tasks, variants, labels, f"{title}: this sweep")]
+    if table in PAPER:
+        md += ["", _paper_table(table, tasks, variants, labels)]
+    paths: dict[str, Path] = {"table": write_text(out / "results.md", "\n".join(md))}
+
+    rows: list[dict[str, Any]] = []
+    for r in sorted(runs, key=lambda r: (r.task, r.variant, r.seed)):
+        rows.append({"level": "run", "task": r.task, "variant": r.variant, "label": labels.get(r.variant, r.variant),
+                     "seed": r.seed, "n": 1, "episodes": r.episodes, "env_steps": r.env_steps,
+                     "avg_return": r.avg_return, "se": "", "final_return": r.final_return,
+                     "success_rate": r.success_rate})
+    for (v, t), c in sorted(cells.items(), key=lambda kv: (kv[0][1], kv[0][0])):
+        ref = PAPER.get(table or "", {}).get(labels.get(v, v), {}).get(t)
+        rows.append({"level": "aggregate", "task": t, "variant": v, "label": labels.get(v, v), "seed": "",
+                     "n": c.n, "avg_return": c.mean, "se": c.se if math.isfinite(c.se) else "",
+                     "paper_mean": ref[0] if ref else "", "paper_se": ref[1] if ref else ""})
+    paths["csv"] = write_text(out / "results.csv", _csv(rows))
+
+    curve_rows = []
+    for t in tasks:
+        data = curves(runs, t, variants, bins)
+        if not data:
+            continue
+        paths[f"curve_{t}"] = _plot(t, data, labels, out / f"curve_{t}.png")
+        for v, (x, m, se) in data.items():
+            curve_rows += [{"task": t, "variant": v, "env_steps": float(xi), "mean_return": float(mi),
+                            "se": float(si)} for xi, mi, si in zip(x, m, se)]
+    paths["curves_csv"] = write_text(out / "curves.csv", _csv(curve_rows))
+    return paths

@@ -1,0 +1,360 @@
+"""Sweeps: a grid of tasks × agent variants × seeds, run as independent, resumable runs.
+
+A sweep file (``sweeps/*.yaml``) is validated into :class:`SweepSpec`::
+
+    name: quick
+    table: table1                 # the paper's table this grid rebuilds (the report prints its numbers)
+    seeds: [0, 1, 2]
+    checkpoint_every: 10          # episodes, for every run
+    overrides: []                 # `--set` overrides applied to every run
+    tasks:                        # the table's columns, each with its env-step budget
+      - {name: keydoor, steps: 60000}
+    variants:                     # the table's rows
+      - {name: hubsgo-specific, label: "HUBS-GO (specific correlations)", agent: hubsgo, model: "{task}-specific"}
+      - {name: hubsgo-fully_connected, agent: hubsgo, graph: fully_connected}
+      - {name: hdqn-incorrect, agent: hdqn, task: "{task}_incorrect"}     # Table 2: another env, same column
+      - {name: td3, agent: td3, tasks: [stack_cubes]}                       # only some columns
+
+Run ``(task, variant, seed)`` writes ``SWEEP_DIR/<task>/<variant>/seed<seed>`` through
+:func:`hubsgo_ppl.experiments.run.train`, each in its own worker process (spawned, one torch thread).
+Re-running a sweep skips finished runs (checkpoint ``env_steps`` ≥ budget), resumes interrupted ones
+from their checkpoint, and retries a crashed run once before reporting it as failed.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import re
+import shutil
+import signal
+import time
+import traceback
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import Field, field_validator, model_validator
+
+from ..resources import sweeps_dir
+from ..specs import SpecError, StrictModel, load_yaml, validate_spec
+from .io import write_yaml
+from .run import CHECKPOINT, RunConfig
+
+__all__ = ["SweepSpec", "TaskEntry", "Variant", "Job", "load_sweep", "plan", "run_sweep", "run_status",
+           "KILL_ENV"]
+
+#: test-only: a worker whose run id ("task/variant/seedK") equals this variable SIGKILLs itself right
+#: after its first checkpoint in that process (a deliberately crashed worker for the resume tests)
+KILL_ENV = "HUBSGO_SWEEP_TEST_KILL_AFTER_CHECKPOINT"
+
+_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
+
+
+class TaskEntry(StrictModel):
+    name: str = Field(description="a built-in task name (a column of the table)")
+    steps: int = Field(gt=0, description="env-step budget of every run on this task")
+    overrides: list[str] = Field(default_factory=list, description="`--set` overrides for this task's runs")
+
+
+class Variant(StrictModel):
+    name: str = Field(description="folder name of the variant, e.g. hubsgo-specific")
+    label: str | None = Field(default=None, description="row label in the report (default: name)")
+    agent: str
+    task: str = Field(default="{task}", description="env task of the run; {task} is the column's task")
+    model: str | None = Field(default=None, description="critic spec name/path; {task} is substituted")
+    graph: str | None = Field(default=None, description="override the spec's graph preset")
+    low_level: str | None = None
+    steps: int | None = Field(default=None, gt=0, description="override the task's budget")
+    overrides: list[str] = Field(default_factory=list)
+    tasks: list[str] | None = Field(default=None, description="run only on these columns")
+
+    @field_validator("name")
+    @classmethod
+    def _name_ok(cls, v: str) -> str:
+        if not _NAME.match(v):
+            raise ValueError(f"{v!r} is not a folder-safe name; use letters, digits, '-', '_' or '.'")
+        return v
+
+    @field_validator("agent")
+    @classmethod
+    def _agent_ok(cls, v: str) -> str:
+        from ..agents.factory import agent_names
+
+        if v not in agent_names():
+            raise ValueError(f"unknown agent {v!r}; use one of: {', '.join(agent_names())}")
+        return v
+
+    @field_validator("graph")
+    @classmethod
+    def _graph_ok(cls, v: str | None) -> str | None:
+        if v is not None and v not in ("specific", "fully_connected", "independent"):
+            raise ValueError(f"unknown graph {v!r}; use specific, fully_connected or independent")
+        return v
+
+    @property
+    def row(self) -> str:
+        return self.label or self.name
+
+
+class SweepSpec(StrictModel):
+    name: str
+    table: Literal["table1", "table2"] | None = None
+    seeds: list[int] = Field(min_length=1)
+    checkpoint_every: int = Field(default=25, gt=0)
+    overrides: list[str] = Field(default_factory=list)
+    tasks: list[TaskEntry] = Field(min_length=1)
+    variants: list[Variant] = Field(min_length=1)
+
+    @field_validator("seeds")
+    @classmethod
+    def _seeds_ok(cls, v: list[int]) -> list[int]:
+        if len(set(v)) != len(v) or min(v) < 0:
+            raise ValueError("seeds must be distinct non-negative integers, e.g. [0, 1, 2]")
+        return v
+
+    @model_validator(mode="after")
+    def _grid_ok(self) -> "SweepSpec":
+        for what, names in (("tasks", [t.name for t in self.tasks]), ("variants", [v.name for v in self.variants])):
+            dup = sorted({n for n in names if names.count(n) > 1})
+            if dup:
+                raise ValueError(f"{what}: duplicate name(s) {dup}; give every entry its own name")
+        columns = {t.name for t in self.tasks}
+        for v in self.variants:
+            bad = sorted(set(v.tasks or []) - columns)
+            if bad:
+                raise ValueError(f"variant {v.name!r}: tasks {bad} are not columns of this sweep; "
+                                 f"use some of {sorted(columns)}")
+        return self
+
+
+@dataclass
+class Job:
+    run_id: str                  # "task/variant/seedK"
+    out: str
+    budget: int
+    config: dict[str, Any]       # RunConfig fields
+
+
+def load_sweep(sweep: str | Path) -> tuple[SweepSpec, Path]:
+    """Load a sweep file (a path, or the name of a shipped one like ``quick``) and check its tasks exist."""
+    path = Path(sweep)
+    if not path.suffix:
+        candidate = sweeps_dir() / f"{sweep}.yaml"
+        if candidate.is_file():
+            path = candidate
+    if not path.is_file():
+        shipped = sorted(p.stem for p in sweeps_dir().glob("*.yaml"))
+        raise SpecError(f"{sweep}: no such sweep file; pass a path or one of: {', '.join(shipped)}")
+    spec = validate_spec(SweepSpec, load_yaml(path), source=str(path))
+    from ..envs import get_task
+
+    for i, t in enumerate(spec.tasks):
+        try:
+            get_task(t.name)
+        except SpecError as exc:
+            raise SpecError(f"{path}: tasks[{i}].name: {exc}") from None
+    for j, v in enumerate(spec.variants):
+        for t in spec.tasks:
+            if v.tasks is None or t.name in v.tasks:
+                try:
+                    get_task(v.task.format(task=t.name))
+                except (SpecError, KeyError) as exc:
+                    raise SpecError(f"{path}: variants[{j}].task: {v.task!r} for column {t.name!r}: {exc}; "
+                                    "use a task name, optionally with {task}") from None
+    return spec, path
+
+
+def plan(spec: SweepSpec, sweep_dir: Path) -> list[Job]:
+    """Every run of the grid, in table order (tasks, then variants, then seeds)."""
+    jobs = []
+    for t in spec.tasks:
+        for v in spec.variants:
+            if v.tasks is not None and t.name not in v.tasks:
+                continue
+            for seed in spec.seeds:
+                budget = v.steps or t.steps
+                cfg = RunConfig(task=v.task.format(task=t.name), agent=v.agent,
+                                model=v.model.format(task=t.name) if v.model else None, graph=v.graph,
+                                steps=budget, seed=seed, low_level=v.low_level,
+                                checkpoint_every=spec.checkpoint_every,
+                                overrides=[*spec.overrides, *t.overrides, *v.overrides])
+                run_id = f"{t.name}/{v.name}/seed{seed}"
+                jobs.append(Job(run_id, str(sweep_dir / t.name / v.name / f"seed{seed}"), budget, asdict(cfg)))
+    return jobs
+
+
+def run_status(job: Job) -> str:
+    """``"finished"`` (checkpoint at or past the budget), ``"partial"`` (a checkpoint short of it) or ``"new"``."""
+    ckpt = Path(job.out) / CHECKPOINT
+    if not ckpt.is_file():
+        return "new"
+    import torch
+
+    try:
+        steps = int(torch.load(ckpt, map_location="cpu", weights_only=False, mmap=True)["env_steps"])
+    except Exception:   # a damaged checkpoint: the run starts again (train() reports if it cannot)
+        return "partial"
+    return "finished" if steps >= job.budget else "partial"
+
+
+# -- the worker (runs in a child process, or a Ray task) ----------------------------------------------------
+
+
+def run_job(job: Job) -> dict[str, Any]:
+    """Train (or resume) one run; never raises: returns ``{"ok": bool, "error": str | None, ...}``."""
+    import torch
+
+    from .run import train
+
+    torch.set_num_threads(1)
+    out = Path(job.out)
+    resume = (out / CHECKPOINT).is_file()
+    if not resume and out.exists():
+        shutil.rmtree(out)          # an attempt that died before its first checkpoint: nothing to keep
+    hook = None
+    if os.environ.get(KILL_ENV) == job.run_id:
+        ckpt = out / CHECKPOINT
+        stamp = ckpt.stat().st_mtime_ns if ckpt.exists() else -1
+
+        def hook(stats: Any) -> None:
+            if ckpt.exists() and ckpt.stat().st_mtime_ns != stamp:
+                os.kill(os.getpid(), signal.SIGKILL)
+    try:
+        summary = train(RunConfig(**job.config), out, resume=resume, progress=False, on_episode=hook)
+    except BaseException as exc:  # noqa: BLE001 - reported to the parent, which decides about retries
+        return {"ok": False, "error": f"{type(exc).__name__}: {exc}".strip(), "trace": traceback.format_exc()}
+    ok = bool(summary["finished"])
+    return {"ok": ok, "error": None if ok else "stopped before its budget", "resumed": resume,
+            "env_steps": summary["env_steps"]}
+
+
+def _child(job: Job, conn: Any) -> None:
+    conn.send(run_job(job))
+    conn.close()
+
+
+# -- backends -----------------------------------------------------------------------------------------------
+
+
+def _local(jobs: list[Job], workers: int, done: Any) -> None:
+    """Run jobs in up to ``workers`` spawned processes; ``done(job, result)`` gets each outcome."""
+    from multiprocessing.connection import wait
+
+    ctx = mp.get_context("spawn")
+    queue = list(jobs)
+    live: dict[Any, tuple[Job, Any, Any]] = {}
+    while queue or live:
+        while queue and len(live) < workers:
+            job = queue.pop(0)
+            recv, send = ctx.Pipe(duplex=False)
+            proc = ctx.Process(target=_child, args=(job, send), name=f"sweep:{job.run_id}", daemon=False)
+            proc.start()
+            send.close()
+            live[proc.sentinel] = (job, proc, recv)
+        for sentinel in wait(list(live)):
+            job, proc, recv = live.pop(sentinel)
+            result = None
+            try:
+                if recv.poll():
+                    result = recv.recv()
+            except (EOFError, OSError):
+                result = None
+            proc.join()
+            recv.close()
+            if result is None:
+                sig = -proc.exitcode if proc.exitcode and proc.exitcode < 0 else None
+                why = f"killed by signal {signal.Signals(sig).name}" if sig else f"exit code {proc.exitcode}"
+                result = {"ok": False, "error": f"worker died ({why})"}
+            done(job, result)
+
+
+def _ray(jobs: list[Job], workers: int, done: Any) -> None:
+    try:
+        import ray
+    except ImportError:
+        raise RuntimeError("the ray backend needs Ray: pip install 'hubsgo-ppl[ray]', or use --backend local") \
+            from None
+    started = not ray.is_initialized()
+    if started:
+        ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False,
+                 runtime_env={"env_vars": {"OMP_NUM_THREADS": "1"}})
+    try:
+        # our own retry policy decides about crashed runs, so Ray must not retry on its own
+        remote = ray.remote(num_cpus=1, max_retries=0)(run_job)
+        pending = {remote.remote(job): job for job in jobs}
+        while pending:
+            ready, _ = ray.wait(list(pending), num_returns=1)
+            job = pending.pop(ready[0])
+            try:
+                result = ray.get(ready[0])
+            except Exception as exc:  # a worker that died (e.g. SIGKILL) surfaces here
+                result = {"ok": False, "error": f"worker died ({type(exc).__name__})"}
+            done(job, result)
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def run_sweep(sweep: str | Path, backend: str = "local", workers: int = 2, out: str | Path | None = None,
+              progress: bool = True) -> dict[str, Any]:
+    """Run (or continue) a sweep. Returns ``{sweep_dir, finished, skipped, retried, failed, runs}``.
+
+    ``finished`` counts runs completed by this call, ``skipped`` runs that were already complete,
+    ``retried`` runs that crashed once and were run again, ``failed`` the ``"run_id: error"`` of runs
+    that crashed twice. ``runs`` maps every run id to its final status.
+    """
+    if backend not in ("local", "ray"):
+        raise ValueError(f"unknown backend {backend!r}; use 'local' or 'ray'")
+    if workers < 1:
+        raise ValueError(f"--workers must be at least 1, got {workers}")
+    spec, path = load_sweep(sweep)
+    sweep_dir = Path(out) if out is not None else Path("runs") / "sweeps" / spec.name
+    sweep_dir.mkdir(parents=True, exist_ok=True)
+    write_yaml(sweep_dir / "sweep.yaml", {**spec.model_dump(mode="json"), "source": str(path)})
+    jobs = plan(spec, sweep_dir)
+    status = {j.run_id: run_status(j) for j in jobs}
+    todo = [j for j in jobs if status[j.run_id] != "finished"]
+    result: dict[str, Any] = {"sweep_dir": str(sweep_dir), "finished": 0,
+                              "skipped": len(jobs) - len(todo), "retried": 0, "failed": [],
+                              "runs": {j.run_id: ("skipped" if status[j.run_id] == "finished" else None) for j in jobs}}
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=len(jobs), initial=result["skipped"], unit="run", desc=f"sweep {spec.name}",
+                   dynamic_ncols=True)
+    execute = _local if backend == "local" else _ray
+    t0 = time.perf_counter()
+
+    def first(job: Job, res: dict[str, Any]) -> None:
+        if res["ok"]:
+            result["finished"] += 1
+            result["runs"][job.run_id] = "finished"
+            if bar is not None:
+                bar.update(1)
+        else:
+            retry.append((job, res["error"]))
+
+    def second(job: Job, res: dict[str, Any]) -> None:
+        if res["ok"]:
+            result["finished"] += 1
+            result["runs"][job.run_id] = "finished after retry"
+        else:
+            result["failed"].append(f"{job.run_id}: {res['error']} (first attempt: {first_errors[job.run_id]})")
+            result["runs"][job.run_id] = "failed"
+        if bar is not None:
+            bar.update(1)
+
+    retry: list[tuple[Job, str]] = []
+    try:
+        execute(todo, workers, first)
+        first_errors = {j.run_id: e for j, e in retry}
+        result["retried"] = len(retry)
+        if retry:
+            execute([j for j, _ in retry], workers, second)
+    finally:
+        if bar is not None:
+            bar.close()
+    result["wall_time"] = round(time.perf_counter() - t0, 1)
+    return result

@@ -1,0 +1,98 @@
+"""The sweep report on a fixture sweep: table cells equal mean ± s.e. computed by hand from metrics.csv."""
+
+import csv
+import math
+import re
+import statistics
+
+import numpy as np
+import pytest
+import yaml
+
+from hubsgo_ppl.experiments.report import PAPER, curves, collect, write_report
+
+VARIANTS = {"hubsgo-specific": "HUBS-GO (specific correlations)", "ppo": "PPO", "lonely": "lonely"}
+
+
+def _metrics(path, steps, returns):
+    path.mkdir(parents=True, exist_ok=True)
+    with (path / "metrics.csv").open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["episode", "env_steps", "length", "success", "options", "explore_eps", "filter_eps", "return",
+                    "wall_time"])
+        for i, (s, r) in enumerate(zip(steps, returns)):
+            w.writerow([i, s, 10, int(r > 0), 1, 0.1, 0.0, r, 0.5 * i])
+
+
+@pytest.fixture
+def sweep_dir(tmp_path):
+    rng = np.random.default_rng(0)
+    root = tmp_path / "sweep"
+    expected = {}
+    for task in ("fourroom", "keydoor"):
+        for variant in VARIANTS:
+            seeds = [0] if variant == "lonely" else [0, 1, 2]
+            for seed in seeds:
+                n = int(rng.integers(5, 30))
+                steps = np.sort(rng.choice(np.arange(1, 1000), n, replace=False))
+                steps[-1] = 1000
+                rets = np.round(rng.random(n), 4)
+                _metrics(root / task / variant / f"seed{seed}", steps.tolist(), rets.tolist())
+                expected.setdefault((variant, task), []).append(statistics.fmean(rets.tolist()))
+    spec = {"name": "fixture", "table": "table1", "seeds": [0, 1, 2],
+            "tasks": [{"name": "fourroom", "steps": 1000}, {"name": "keydoor", "steps": 1000}],
+            "variants": [{"name": v, "label": l, "agent": "ppo"} for v, l in VARIANTS.items()]}
+    (root / "sweep.yaml").write_text(yaml.safe_dump(spec))
+    return root, expected
+
+
+def test_table_cells_are_mean_and_standard_error_of_per_run_averages(sweep_dir):
+    root, expected = sweep_dir
+    paths = write_report(root)
+    md = paths["table"].read_text()
+    ours = md.split("The paper's")[0]
+    for (variant, task), avgs in expected.items():
+        line = next(l for l in ours.splitlines() if l.startswith(f"| {VARIANTS[variant]} |"))
+        cell = line.strip("|").split("|")[1 + ["fourroom", "keydoor"].index(task)].strip()
+        mean = statistics.fmean(avgs)
+        if len(avgs) == 1:
+            assert cell == f"{mean:.4f} (n=1)"
+            continue
+        se = statistics.stdev(avgs) / math.sqrt(len(avgs))
+        m, s = map(float, re.fullmatch(r"(\S+) ± (\S+)", cell).groups())
+        assert m == pytest.approx(mean, abs=5e-5) and s == pytest.approx(se, abs=5e-5)
+    with paths["csv"].open() as fh:
+        rows = list(csv.DictReader(fh))
+    agg = {(r["variant"], r["task"]): r for r in rows if r["level"] == "aggregate"}
+    for key, avgs in expected.items():
+        assert float(agg[key]["avg_return"]) == pytest.approx(statistics.fmean(avgs), rel=1e-12)
+        if len(avgs) > 1:
+            assert float(agg[key]["se"]) == pytest.approx(statistics.stdev(avgs) / math.sqrt(len(avgs)), rel=1e-9)
+    assert float(agg[("ppo", "keydoor")]["paper_mean"]) == PAPER["table1"]["PPO"]["keydoor"][0]
+    assert sum(r["level"] == "run" for r in rows) == 2 * 7
+    # the paper's numbers, for the rows it has, in the same layout
+    assert "| PPO | 0.6664 ± 0.0083 | 0.7567 ± 0.0084 |" in md
+    for task in ("fourroom", "keydoor"):
+        assert paths[f"curve_{task}"].read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_learning_curves_bin_by_steps_and_carry_forward(tmp_path):
+    root = tmp_path / "s"
+    _metrics(root / "keydoor" / "a" / "seed0", [10, 20, 60, 100], [0.0, 1.0, 1.0, 0.0])
+    _metrics(root / "keydoor" / "a" / "seed1", [30, 100], [0.2, 0.6])
+    data = curves(collect(root), "keydoor", ["a"], bins=4)
+    x, mean, se = data["a"]
+    np.testing.assert_allclose(x, [12.5, 37.5, 62.5, 87.5])
+    run0 = np.array([0.5, 0.5, 1.0, 0.0])           # bin 1 is empty: carried forward
+    run1 = np.array([np.nan, 0.2, 0.2, 0.6])        # nothing before its first episode
+    np.testing.assert_allclose(mean, np.nanmean(np.vstack([run0, run1]), 0))
+    np.testing.assert_allclose(se[1:], np.std(np.vstack([run0, run1])[:, 1:], 0, ddof=1) / np.sqrt(2))
+    assert se[0] == 0.0
+
+
+def test_report_errors_name_the_problem(tmp_path):
+    with pytest.raises(FileNotFoundError, match="no such sweep directory"):
+        write_report(tmp_path / "missing")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(FileNotFoundError, match="no runs with metrics"):
+        write_report(tmp_path / "empty")

@@ -1,0 +1,115 @@
+"""Sweeps: validation, the shipped grids, resume after a killed worker, and the Ray backend."""
+
+import importlib.util
+from pathlib import Path
+
+import pytest
+import yaml
+
+from hubsgo_ppl.experiments.logger import read_csv_rows
+from hubsgo_ppl.experiments.run import RunConfig, train
+from hubsgo_ppl.experiments.sweep import KILL_ENV, SweepSpec, load_sweep, plan, run_status, run_sweep
+from hubsgo_ppl.specs import SpecError, validate_spec
+
+FAST = ["high.learning_starts=8", "high.batch_size=8", "low.learning_starts=100000", "low.hidden=[16]",
+        "high.hidden=[16]", "loop.option_steps=15"]
+
+
+def _write(tmp_path, **spec):
+    base = {"name": "t", "seeds": [0], "checkpoint_every": 1, "overrides": FAST,
+            "tasks": [{"name": "fourroom", "steps": 1}], "variants": [{"name": "hdqn", "agent": "hdqn"}]}
+    base.update(spec)
+    path = tmp_path / "sweep.yaml"
+    path.write_text(yaml.safe_dump(base))
+    return path
+
+
+def _rows(path):
+    return [{k: v for k, v in r.items() if k != "wall_time"} for r in read_csv_rows(Path(path) / "metrics.csv")]
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"variants": [{"name": "x", "agent": "a2c"}]}, r"variants\[0\].agent: .*unknown agent 'a2c'"),
+    ({"variants": [{"name": "x", "agent": "hdqn", "tasks": ["maze"]}]}, "not columns of this sweep"),
+    ({"variants": [{"name": "x", "agent": "hdqn"}, {"name": "x", "agent": "ppo"}]}, "duplicate name"),
+    ({"tasks": [{"name": "fourroom", "steps": 0}]}, r"tasks\[0\].steps"),
+    ({"tasks": [{"name": "mazz", "steps": 5}]}, r"tasks\[0\].name: unknown task 'mazz'"),
+    ({"seeds": [0, 0]}, "seeds"),
+    ({"variants": [{"name": "x", "agent": "hdqn", "task": "{task}_wrong"}]}, r"variants\[0\].task"),
+    ({"budget": 3}, "budget: unknown key"),
+])
+def test_bad_sweep_files_name_the_file_and_key(tmp_path, change, message):
+    path = _write(tmp_path, **change)
+    with pytest.raises(SpecError, match=message) as err:
+        load_sweep(path)
+    assert str(path) in str(err.value)
+
+
+def test_shipped_grids(tmp_path):
+    quick, _ = load_sweep("quick")
+    jobs = plan(quick, tmp_path)
+    assert len(jobs) == 2 * 6 * 3
+    assert {j.config["task"] for j in jobs} == {"fourroom", "keydoor"}
+    assert {j.config["agent"] for j in jobs} == {"hubsgo", "hdqn", "ddqn", "ppo"}
+    assert {j.config["graph"] for j in jobs if j.config["agent"] == "hubsgo"} == {None, "fully_connected", "independent"}
+    t2, _ = load_sweep("table2")
+    runs = {(j.run_id.split("/")[1], j.config["task"]) for j in plan(t2, tmp_path)}
+    assert ("hubsgo-incorrect", "keydoor_incorrect") in runs and ("hdqn-incorrect", "fourroom_incorrect") in runs
+    assert ("hdqn", "keydoor") in runs and ("hiro", "fourroom") in runs
+    t1 = validate_spec(SweepSpec, yaml.safe_load((Path(_).parent / "table1.yaml").read_text()), "table1.yaml")
+    assert [t.name for t in t1.tasks] == ["fourroom", "keydoor", "stack_cubes", "push_any_one", "collect_three_balls"]
+    assert {v.agent for v in t1.variants} == {"hubsgo", "ddqn", "ppo", "td3", "hdqn", "hiro"}
+
+
+def test_sweep_resumes_after_a_killed_worker(tmp_path, monkeypatch):
+    """Every hierarchical agent on the other grid tasks (keydoor is in test_run), one worker killed twice."""
+    path = _write(tmp_path, tasks=[{"name": "fourroom", "steps": 1}, {"name": "fourroom_incorrect", "steps": 1},
+                                   {"name": "keydoor_incorrect", "steps": 1}, {"name": "keydoor", "steps": 6000}],
+                  variants=[{"name": "hubsgo", "agent": "hubsgo", "model": "{task}-specific",
+                             "tasks": ["fourroom", "fourroom_incorrect", "keydoor_incorrect"]},
+                            {"name": "hdqn", "agent": "hdqn"}])
+    out = tmp_path / "sweep"
+    victim = "keydoor/hdqn/seed0"
+    monkeypatch.setenv(KILL_ENV, victim)
+    first = run_sweep(path, workers=2, out=out, progress=False)
+    assert first["finished"] == 6 and first["skipped"] == 0 and first["retried"] == 1
+    assert len(first["failed"]) == 1 and first["failed"][0].startswith(victim)
+    assert "SIGKILL" in first["failed"][0]
+    spec, _ = load_sweep(path)
+    job = {j.run_id: j for j in plan(spec, out)}[victim]
+    assert run_status(job) == "partial"            # the retry resumed, got one checkpoint further, died
+
+    monkeypatch.delenv(KILL_ENV)
+    second = run_sweep(path, workers=2, out=out, progress=False)
+    assert (second["finished"], second["skipped"], second["retried"], second["failed"]) == (1, 6, 0, [])
+    assert second["runs"][victim] == "finished" and all(s == "skipped" for r, s in second["runs"].items() if r != victim)
+    rows = _rows(job.out)
+    assert [int(r["episode"]) for r in rows] == list(range(len(rows))) and int(rows[-1]["env_steps"]) >= 6000
+    reference = tmp_path / "uninterrupted"
+    train(RunConfig(**job.config), reference, progress=False)
+    assert rows == _rows(reference), "kill + resume must give the uninterrupted run's metrics"
+    for run_id, status in second["runs"].items():
+        assert (out / run_id / "checkpoint.pt").is_file() and (out / run_id / "learning_curve.png").is_file()
+    third = run_sweep(path, workers=1, out=out, progress=False)
+    assert (third["finished"], third["skipped"]) == (0, 7)
+
+
+@pytest.mark.skipif(importlib.util.find_spec("ray") is None, reason="the ray extra is not installed")
+def test_ray_backend_runs_a_two_run_grid(tmp_path):
+    path = _write(tmp_path, seeds=[0, 1])
+    out = tmp_path / "ray"
+    result = run_sweep(path, backend="ray", workers=2, out=out, progress=False)
+    assert (result["finished"], result["skipped"], result["failed"]) == (2, 0, [])
+    for seed in (0, 1):
+        assert read_csv_rows(out / "fourroom" / "hdqn" / f"seed{seed}" / "metrics.csv")
+    assert _rows(out / "fourroom/hdqn/seed0") != _rows(out / "fourroom/hdqn/seed1")
+    again = run_sweep(path, backend="local", workers=1, out=out, progress=False)
+    assert (again["finished"], again["skipped"]) == (0, 2)
+
+
+def test_bad_backend_and_workers(tmp_path):
+    path = _write(tmp_path)
+    with pytest.raises(ValueError, match="unknown backend"):
+        run_sweep(path, backend="slurm", out=tmp_path / "x", progress=False)
+    with pytest.raises(ValueError, match="at least 1"):
+        run_sweep(path, workers=0, out=tmp_path / "x", progress=False)
