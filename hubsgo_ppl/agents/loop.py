@@ -44,6 +44,7 @@ class LoopConfig:
     filter_end: float = 1.0
     filter_fraction: float = 0.5
     eval_filter: float = 1.0                    # greedy evaluation chooses from Ĝt with this probability
+    critic_every: int = 1                       # high-level updates per critic update (1 = Algorithm 1)
 
 
 @dataclass
@@ -162,7 +163,8 @@ class HRLLoop:
                     target = None if ghat is None else torch.as_tensor(ghat)
                     stats, batch = self.high.update(target)
                     record(stats)
-                    record(self.filter.update(batch))
+                    if self.high.updates % max(cfg.critic_every, 1) == 0:
+                        record(self.filter.update(batch))
         if train:
             self.episodes += 1
         return EpisodeStats(episode=ep, env_steps=self.env_steps, ret=ret, length=length, success=success,

@@ -27,13 +27,16 @@ PRESETS: dict[str, dict[str, Any]] = {
                  "temperature": 0.3, "high_noise": 0.3},
     },
     "robosuite": {
-        "steps": 30_000,
+        "steps": 10_000,
         "low_level": "scripted",
-        "env": {},
-        "loop": {"option_steps": 120, "explore_fraction": 0.3, "filter_fraction": 0.5,
-                 "low_explore_start": 0.0, "low_explore_end": 0.0},
+        "env": {},                      # e.g. {horizon: 300}; the catalogue's options are the defaults
+        # 60 steps fit any single scripted sub-goal (measured <= 45 for grasp/place, pushes continue over
+        # two options); shorter options give the high level more decisions per env step
+        "loop": {"option_steps": 60, "explore_fraction": 0.3, "filter_fraction": 0.3,
+                 # the scripted controller ignores these; they scale GoalTD3's exploration noise
+                 "low_explore_start": 1.0, "low_explore_end": 0.3, "low_explore_fraction": 0.5},
         "high": {"hidden": [128, 128], "lr": 1e-3, "batch_size": 32, "learning_starts": 32},
-        "low": {},
+        "low": {},                      # ScriptedOSC (scripted) or GoalTD3Config (learned) fields
         "td3": {"learning_rate": 1e-3, "buffer_size": 100_000, "learning_starts": 1000, "batch_size": 256,
                 "train_freq": 1, "gamma": 0.99, "noise_sigma": 0.1, "policy_kwargs": {"net_arch": [256, 256]}},
         # goals are end-effector offsets (m) within +-goal_scale

@@ -1,0 +1,393 @@
+"""The learned low level of the arm tasks: goal-conditioned TD3 with hindsight experience replay.
+
+Issue 4, low level (a). The high level picks a sub-goal g; the task turns it into a target region
+``env.unwrapped.subgoal_target(g) = (xyz, gripper)`` (a waypoint re-evaluated on every step, so routing
+— lift, cross, descend — stays in the task). This policy learns to bring the end effector there and
+to drive the gripper to the commanded value. Its goal input is the target *relative to the end
+effector* (plus the gripper command), so one policy serves every sub-goal of every task.
+
+References:
+    Fujimoto, van Hoof, Meger (2018). Addressing Function Approximation Error in Actor-Critic Methods
+    (TD3: twin critics, target policy smoothing, delayed actor updates).
+    Andrychowicz et al. (2017). Hindsight Experience Replay (sparse reward -1 until the goal is
+    reached; the 'future' relabelling strategy with k extra goals per transition, stored eagerly as in
+    HER's Algorithm 1).
+
+A goal is ``(position, gripper)``; what a transition *achieved* is the end-effector position after
+the step (read from the observation, ``pos_slice``) and the gripper command it applied. It reached a
+goal when the position is within ``tolerance`` metres and the gripper command within
+``gripper_tolerance`` of the goal's. Transitions are buffered per option (``begin_option`` starts a new
+trajectory) and written to the replay with their relabelled copies when the trajectory ends.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+from torch import nn
+
+from .buffers import ReplayBuffer
+from .nets import mlp
+
+__all__ = ["GoalTD3Config", "GoalTD3", "her_future_relabel", "goal_reward"]
+
+
+@dataclass
+class GoalTD3Config:
+    """Hyperparameters of :class:`GoalTD3` (``low:`` section of the robosuite preset)."""
+
+    hidden: tuple[int, ...] = (256, 256)
+    actor_lr: float = 1e-3
+    critic_lr: float = 1e-3
+    gamma: float = 0.95              # per low-level step; HER's value for short-horizon reaching
+    tau: float = 0.05                # Polyak rate of the target networks (HER: 0.95 retention)
+    batch_size: int = 256
+    buffer_size: int = 200_000
+    learning_starts: int = 500       # stored transitions (relabelled included) before updates start
+    train_every: int = 1             # env steps per gradient step
+    gradient_steps: int = 1          # gradient steps each time training triggers
+    policy_delay: int = 2            # TD3: one actor update per this many critic updates
+    target_noise: float = 0.2        # TD3 target policy smoothing (fraction of the action range)
+    target_noise_clip: float = 0.5
+    noise_sigma: float = 0.2         # Gaussian exploration std at explore_eps = 1 (fraction of range)
+    random_eps: float = 0.3          # uniform random action with probability random_eps * explore_eps
+    action_l2: float = 0.1           # HER's penalty on the actor's (normalised) actions
+    her_k: int = 4                   # relabelled copies per transition ('future' strategy)
+    tolerance: float = 0.02          # metres: the target region's radius
+    gripper_tolerance: float = 0.5   # |applied - commanded| gripper within this counts as reached
+    goal_scale: float = 10.0         # relative goal (m) times this is the network input
+    use_obs: bool = True             # also feed the (normalised) observation, not only the goal
+    obs_clip: float = 5.0
+
+    def __post_init__(self) -> None:
+        checks = {"actor_lr": self.actor_lr > 0, "critic_lr": self.critic_lr > 0,
+                  "gamma": 0 <= self.gamma < 1, "tau": 0 < self.tau <= 1, "batch_size": self.batch_size > 0,
+                  "buffer_size": self.buffer_size > 0, "learning_starts": self.learning_starts >= 0,
+                  "train_every": self.train_every >= 1, "gradient_steps": self.gradient_steps >= 1,
+                  "policy_delay": self.policy_delay >= 1, "target_noise": self.target_noise >= 0,
+                  "target_noise_clip": self.target_noise_clip >= 0, "noise_sigma": self.noise_sigma >= 0,
+                  "random_eps": 0 <= self.random_eps <= 1, "action_l2": self.action_l2 >= 0,
+                  "her_k": self.her_k >= 0, "tolerance": self.tolerance > 0,
+                  "gripper_tolerance": self.gripper_tolerance > 0, "goal_scale": self.goal_scale > 0,
+                  "obs_clip": self.obs_clip > 0}
+        bad = [k for k, ok in checks.items() if not ok]
+        if bad:
+            raise ValueError(f"GoalTD3 setting(s) out of range: "
+                             + ", ".join(f"{k}={getattr(self, k)!r}" for k in bad)
+                             + " (rates and sizes must be positive, gamma in [0, 1), random_eps in [0, 1])")
+
+
+def goal_reward(achieved_pos: np.ndarray, achieved_grip: np.ndarray | None, goal_pos: np.ndarray,
+                goal_grip: np.ndarray | None, tolerance: float, gripper_tolerance: float) -> np.ndarray:
+    """HER's sparse reward: 0 where the goal is reached, -1 elsewhere (vectorised over leading dims)."""
+    ok = np.linalg.norm(np.asarray(achieved_pos) - np.asarray(goal_pos), axis=-1) < tolerance
+    if goal_grip is not None:
+        ok &= np.abs(np.asarray(achieved_grip) - np.asarray(goal_grip)) < gripper_tolerance
+    return ok.astype(np.float32) - 1.0
+
+
+def her_future_relabel(achieved: np.ndarray, k: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """HER 'future' strategy on one trajectory of T transitions.
+
+    ``achieved[t]`` is what transition t achieved. For every t it draws ``k`` indices t' uniformly
+    from ``[t, T)`` and returns ``(source, goals)``: ``source`` (T*k,) the transition each copy
+    relabels and ``goals`` (T*k, D) = ``achieved[t']``, the goal it is relabelled with.
+    """
+    achieved = np.asarray(achieved)
+    T = achieved.shape[0]
+    if T == 0 or k == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros((0, *achieved.shape[1:]), dtype=achieved.dtype)
+    source = np.repeat(np.arange(T), k)
+    # t' = t + floor(u * (T - t)) is uniform over {t, ..., T-1}
+    future = source + np.floor(rng.random(T * k) * (T - source)).astype(np.int64)
+    return source, achieved[future]
+
+
+class _RunningNorm:
+    """Running mean/std of the observation (HER normalises its inputs); state is plain arrays."""
+
+    def __init__(self, dim: int, clip: float):
+        self.clip = clip
+        self.count = 0.0
+        self.mean = np.zeros(dim)
+        self.m2 = np.zeros(dim)
+
+    def update(self, x: np.ndarray) -> None:
+        x = np.asarray(x, dtype=np.float64).reshape(-1, self.mean.size)
+        n, mean = x.shape[0], x.mean(0)
+        delta = mean - self.mean
+        total = self.count + n
+        # Chan et al.'s parallel update: exact for batches, no catastrophic cancellation
+        self.m2 += ((x - mean) ** 2).sum(0) + delta ** 2 * self.count * n / total
+        self.mean += delta * n / total
+        self.count = total
+
+    def __call__(self, x: torch.Tensor) -> torch.Tensor:
+        std = np.sqrt(self.m2 / max(self.count, 1.0)) + 1e-2   # floor: constant features stay finite
+        mean = torch.as_tensor(self.mean, dtype=torch.float32)
+        return ((x - mean) / torch.as_tensor(std, dtype=torch.float32)).clamp(-self.clip, self.clip)
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"count": self.count, "mean": self.mean.copy(), "m2": self.m2.copy()}
+
+    def load_state_dict(self, s: dict[str, Any]) -> None:
+        self.count, self.mean, self.m2 = float(s["count"]), np.array(s["mean"]), np.array(s["m2"])
+
+
+class GoalTD3:
+    """Goal-conditioned TD3 + HER: the learned low level of the robosuite tasks (issue 4).
+
+    The loop's low-level protocol: ``act`` (called with the env, from which it reads the sub-goal's
+    current target), ``observe`` (stores the transition; trains), ``begin_option`` (a new trajectory
+    for the 'future' relabelling), ``state_dict`` / ``load_state_dict`` and ``rng``.
+
+    Args:
+        obs_dim: flat observation size.
+        action_low, action_high: the env's action bounds.
+        pos_slice: ``(start, stop)`` of the end-effector position inside the observation.
+        gripper_index: index of the gripper command in the action, or None (no gripper).
+        config: hyperparameters.
+        generator: seeds the network initialisation and the training noise.
+        rng: exploration, replay sampling and relabelling.
+    """
+
+    learns = True
+
+    def __init__(self, obs_dim: int, action_low: np.ndarray, action_high: np.ndarray,
+                 pos_slice: tuple[int, int], gripper_index: int | None, config: GoalTD3Config,
+                 generator: torch.Generator, rng: np.random.Generator):
+        self.cfg = config
+        self.rng = rng
+        self.gen = generator
+        self.low = np.asarray(action_low, dtype=np.float32)
+        self.high = np.asarray(action_high, dtype=np.float32)
+        if self.low.shape != self.high.shape or self.low.ndim != 1 or not (self.high > self.low).all():
+            raise ValueError(f"action bounds must be 1-d with high > low, got low={self.low}, high={self.high}")
+        self.act_dim = self.low.size
+        start, stop = pos_slice
+        if not 0 <= start < stop <= obs_dim:
+            raise ValueError(f"pos_slice {pos_slice} does not lie inside an observation of size {obs_dim}")
+        self.pos = slice(start, stop)
+        self.pos_dim = stop - start
+        if gripper_index is not None and not 0 <= gripper_index < self.act_dim:
+            raise ValueError(f"gripper_index {gripper_index} is not an action index (action size {self.act_dim})")
+        self.grip = gripper_index
+        self.goal_dim = self.pos_dim + (gripper_index is not None)
+        self.obs_dim = obs_dim
+        in_dim = (obs_dim if config.use_obs else 0) + self.goal_dim
+        self.actor = mlp(in_dim, config.hidden, self.act_dim, generator)
+        self.actor_target = mlp(in_dim, config.hidden, self.act_dim, generator)
+        self.critics = nn.ModuleList(mlp(in_dim + self.act_dim, config.hidden, 1, generator) for _ in range(2))
+        self.critics_target = nn.ModuleList(mlp(in_dim + self.act_dim, config.hidden, 1, generator)
+                                            for _ in range(2))
+        self.actor_target.load_state_dict(self.actor.state_dict())
+        self.critics_target.load_state_dict(self.critics.state_dict())
+        self.actor_opt = torch.optim.Adam(self.actor.parameters(), lr=config.actor_lr)
+        self.critic_opt = torch.optim.Adam(self.critics.parameters(), lr=config.critic_lr)
+        self.norm = _RunningNorm(obs_dim, config.obs_clip)
+        self.buffer = ReplayBuffer(config.buffer_size, rng, obs=(obs_dim,), action=(self.act_dim,),
+                                   next_obs=(obs_dim,), goal=(self.goal_dim,), reward=())
+        self._traj: dict[str, list[np.ndarray]] = {"obs": [], "action": [], "next_obs": [], "goal": []}
+        self._goal: np.ndarray | None = None   # the goal act() last acted towards (observe stores it)
+        self.steps = 0
+        self.updates = 0
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def for_env(cls, env: gym.Env, low_cfg: dict[str, Any], gen: torch.Generator,
+                rng: np.random.Generator) -> "GoalTD3":
+        """Build for a robosuite sub-goal task (``agents/factory.py``); ``low_cfg`` holds config fields."""
+        names = {f.name for f in dataclasses.fields(GoalTD3Config)}
+        unknown = set(low_cfg) - names
+        if unknown:
+            raise ValueError(f"unknown low setting(s) {sorted(unknown)} for the learned arm low level "
+                             f"(GoalTD3); known: {sorted(names)}")
+        config = GoalTD3Config(**{k: tuple(v) if isinstance(v, list) else v for k, v in low_cfg.items()})
+        if not isinstance(env.action_space, gym.spaces.Box):
+            raise TypeError(f"GoalTD3 needs a continuous (Box) action space, got {env.action_space}; "
+                            "grid tasks use GoalDQN")
+        task = env.unwrapped
+        if not hasattr(task, "subgoal_target"):
+            raise TypeError(f"{type(task).__name__} has no subgoal_target(i); GoalTD3 drives robosuite "
+                            "sub-goal tasks (hubsgo_ppl.envs.make('stack_cubes'))")
+        keys = list(getattr(getattr(task, "task", None), "observation_keys", []))
+        if not keys or keys[0] != "robot0_eef_pos":
+            raise ValueError("GoalTD3.for_env expects the flat observation to start with robot0_eef_pos "
+                             f"(the achieved position); this env's keys are {keys or 'unknown'}")
+        return cls(int(np.prod(env.observation_space.shape)), env.action_space.low, env.action_space.high,
+                   (0, 3), env.action_space.shape[0] - 1, config, gen, rng)
+
+    # ------------------------------------------------------------------ networks
+    def _inputs(self, obs: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+        """Network input: [normalised obs], goal position relative to the end effector, gripper command."""
+        rel = (goal[..., : self.pos_dim] - obs[..., self.pos]) * self.cfg.goal_scale
+        parts = [self.norm(obs)] if self.cfg.use_obs else []
+        parts += [rel, goal[..., self.pos_dim:]]
+        return torch.cat(parts, dim=-1)
+
+    def _scale(self, a: torch.Tensor) -> torch.Tensor:
+        """[-1, 1] (tanh) -> the env's bounds."""
+        low, high = torch.as_tensor(self.low), torch.as_tensor(self.high)
+        return low + (a + 1.0) * 0.5 * (high - low)
+
+    def _unscale(self, a: torch.Tensor) -> torch.Tensor:
+        low, high = torch.as_tensor(self.low), torch.as_tensor(self.high)
+        return 2.0 * (a - low) / (high - low) - 1.0
+
+    def _q(self, nets: nn.ModuleList, x: torch.Tensor, a_unit: torch.Tensor) -> list[torch.Tensor]:
+        return [net(torch.cat([x, a_unit], -1)).squeeze(-1) for net in nets]
+
+    # ------------------------------------------------------------------ acting
+    def goal_of(self, env: gym.Env, goal_index: int) -> np.ndarray:
+        """Goal vector of sub-goal ``goal_index`` on the env's current state: target xyz (+ gripper)."""
+        xyz, gripper = env.unwrapped.subgoal_target(goal_index)
+        xyz = np.asarray(xyz, dtype=np.float32).reshape(-1)
+        if xyz.size != self.pos_dim:
+            raise ValueError(f"subgoal_target({goal_index}) gave a {xyz.size}-d position; this policy "
+                             f"reaches {self.pos_dim}-d positions")
+        return np.append(xyz, np.float32(gripper)) if self.grip is not None else xyz
+
+    def policy(self, obs: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        """Deterministic action of the actor for ``goal`` (position, [gripper])."""
+        with torch.no_grad():
+            x = self._inputs(torch.as_tensor(obs, dtype=torch.float32), torch.as_tensor(goal, dtype=torch.float32))
+            return self._scale(torch.tanh(self.actor(x))).numpy()
+
+    def act(self, obs: np.ndarray, goal_index: int, explore_eps: float, env: gym.Env) -> np.ndarray:
+        """Action towards sub-goal ``goal_index``: Gaussian noise of std ``explore_eps * noise_sigma``
+        (fraction of the range) and, with probability ``explore_eps * random_eps``, a uniform action.
+        ``explore_eps = 0`` (greedy evaluation) is deterministic."""
+        if not 0.0 <= explore_eps <= 1.0:
+            raise ValueError(f"explore_eps must be in [0, 1], got {explore_eps}")
+        goal = self.goal_of(env, goal_index)
+        self._goal = goal
+        if explore_eps > 0 and self.rng.random() < explore_eps * self.cfg.random_eps:
+            return self.rng.uniform(self.low, self.high).astype(np.float32)
+        a = self.policy(obs, goal)
+        if explore_eps > 0 and self.cfg.noise_sigma > 0:
+            a = a + self.rng.normal(0.0, explore_eps * self.cfg.noise_sigma, self.act_dim) * (self.high - self.low) / 2
+        return np.clip(a, self.low, self.high).astype(np.float32)
+
+    # ------------------------------------------------------------------ storing
+    def achieved(self, action: np.ndarray, next_obs: np.ndarray) -> np.ndarray:
+        """What a transition achieved: end-effector position after it (+ the gripper command applied)."""
+        pos = np.asarray(next_obs, dtype=np.float32)[..., self.pos]
+        if self.grip is None:
+            return pos
+        return np.concatenate([pos, np.asarray(action, dtype=np.float32)[..., self.grip: self.grip + 1]], -1)
+
+    def reward(self, achieved: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        """HER reward of reaching ``goal`` given ``achieved`` (both ``(..., goal_dim)``)."""
+        g = self.grip is not None
+        return goal_reward(achieved[..., : self.pos_dim], achieved[..., self.pos_dim] if g else None,
+                           goal[..., : self.pos_dim], goal[..., self.pos_dim] if g else None,
+                           self.cfg.tolerance, self.cfg.gripper_tolerance)
+
+    def begin_option(self) -> None:
+        """A new option starts: the pending trajectory ends (its relabelled copies go to replay)."""
+        self.end_trajectory()
+
+    def end_trajectory(self) -> int:
+        """Write the pending trajectory and its HER 'future' copies to replay; returns how many rows."""
+        T = len(self._traj["obs"])
+        if T == 0:
+            return 0
+        obs, action, next_obs, goal = (np.stack(self._traj[k]) for k in ("obs", "action", "next_obs", "goal"))
+        for k in self._traj:
+            self._traj[k].clear()
+        achieved = self.achieved(action, next_obs)
+        source, her_goals = her_future_relabel(achieved, self.cfg.her_k, self.rng)
+        idx = np.concatenate([np.arange(T), source])
+        goals = np.concatenate([goal, her_goals])
+        rewards = self.reward(achieved[idx], goals)
+        for i, g, r in zip(idx, goals, rewards):
+            self.buffer.add(obs=obs[i], action=action[i], next_obs=next_obs[i], goal=g, reward=r)
+        self.norm.update(obs)
+        return len(idx)
+
+    def observe(self, obs, action, next_obs, achieved_before, achieved_after, terminated) -> dict[str, float] | None:
+        """Buffer one transition towards the goal ``act`` used; train every ``train_every`` steps.
+
+        The env's sub-goal flags are not needed: the goal is the target region itself, reached or not
+        by the end-effector position. ``terminated`` ends the trajectory (the episode is over).
+        """
+        if self._goal is None:
+            raise RuntimeError("observe() before act(): GoalTD3 stores the goal that act() acted towards")
+        self._traj["obs"].append(np.asarray(obs, dtype=np.float32))
+        self._traj["action"].append(np.asarray(action, dtype=np.float32))
+        self._traj["next_obs"].append(np.asarray(next_obs, dtype=np.float32))
+        self._traj["goal"].append(self._goal)
+        if terminated:
+            self.end_trajectory()
+        self.steps += 1
+        if len(self.buffer) >= max(self.cfg.learning_starts, self.cfg.batch_size) \
+                and self.steps % self.cfg.train_every == 0:
+            stats = [self.update() for _ in range(self.cfg.gradient_steps)]
+            return {k: float(np.mean([s[k] for s in stats if k in s])) for k in stats[-1]}
+        return None
+
+    # ------------------------------------------------------------------ learning
+    def update(self) -> dict[str, float]:
+        """One TD3 step on a replay minibatch (critic; actor and targets every ``policy_delay``)."""
+        cfg = self.cfg
+        b = self.buffer.sample(cfg.batch_size)
+        x = self._inputs(b["obs"], b["goal"])
+        x_next = self._inputs(b["next_obs"], b["goal"])
+        a_unit = self._unscale(b["action"])
+        with torch.no_grad():
+            noise = (torch.randn(a_unit.shape, generator=self.gen) * cfg.target_noise).clamp(
+                -cfg.target_noise_clip, cfg.target_noise_clip)
+            a_next = (torch.tanh(self.actor_target(x_next)) + noise).clamp(-1.0, 1.0)
+            q_next = torch.min(*self._q(self.critics_target, x_next, a_next))
+            # no terminal on reaching (HER); returns of -1 per step lie in [-1/(1-γ), 0]
+            y = (b["reward"] + cfg.gamma * q_next).clamp(-1.0 / (1.0 - cfg.gamma), 0.0)
+        q1, q2 = self._q(self.critics, x, a_unit)
+        critic_loss = (q1 - y).pow(2).mean() + (q2 - y).pow(2).mean()
+        self.critic_opt.zero_grad()
+        critic_loss.backward()
+        self.critic_opt.step()
+        self.updates += 1
+        out = {"low/critic_loss": critic_loss.item(), "low/q": q1.mean().item(),
+               "low/reward": b["reward"].mean().item()}
+        if self.updates % cfg.policy_delay == 0:
+            pi = torch.tanh(self.actor(x))
+            actor_loss = -self._q(self.critics[:1], x, pi)[0].mean() + cfg.action_l2 * pi.pow(2).mean()
+            self.actor_opt.zero_grad()
+            actor_loss.backward()
+            self.actor_opt.step()
+            with torch.no_grad():
+                for net, tgt in ((self.actor, self.actor_target), (self.critics, self.critics_target)):
+                    for p, pt in zip(net.parameters(), tgt.parameters()):
+                        pt.mul_(1 - cfg.tau).add_(p, alpha=cfg.tau)
+            out["low/actor_loss"] = actor_loss.item()
+        return out
+
+    # ------------------------------------------------------------------ checkpointing
+    def state_dict(self) -> dict[str, Any]:
+        """Networks, optimisers, replay, normaliser, pending trajectory and the noise generator's state."""
+        return {"actor": self.actor.state_dict(), "actor_target": self.actor_target.state_dict(),
+                "critics": self.critics.state_dict(), "critics_target": self.critics_target.state_dict(),
+                "actor_opt": self.actor_opt.state_dict(), "critic_opt": self.critic_opt.state_dict(),
+                "buffer": self.buffer.state_dict(), "norm": self.norm.state_dict(),
+                "traj": {k: np.stack(v) if v else np.zeros((0,)) for k, v in self._traj.items()},
+                "goal": None if self._goal is None else self._goal.copy(),
+                "gen": self.gen.get_state(), "steps": self.steps, "updates": self.updates}
+
+    def load_state_dict(self, s: dict[str, Any]) -> None:
+        self.actor.load_state_dict(s["actor"])
+        self.actor_target.load_state_dict(s["actor_target"])
+        self.critics.load_state_dict(s["critics"])
+        self.critics_target.load_state_dict(s["critics_target"])
+        self.actor_opt.load_state_dict(s["actor_opt"])
+        self.critic_opt.load_state_dict(s["critic_opt"])
+        self.buffer.load_state_dict(s["buffer"])
+        self.norm.load_state_dict(s["norm"])
+        self._traj = {k: [np.array(row) for row in v] if len(v) else [] for k, v in s["traj"].items()}
+        self._goal = None if s["goal"] is None else np.array(s["goal"])
+        self.gen.set_state(s["gen"])
+        self.steps, self.updates = int(s["steps"]), int(s["updates"])
