@@ -24,14 +24,12 @@ def rolling_mean(x: Sequence[float], window: int) -> np.ndarray:
 
 def plot_learning_curve(steps: Sequence[float], returns: Sequence[float], success: Sequence[float],
                         path: str | Path, title: str = "", window: int = 20) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure   # no pyplot: leaves the caller's backend (e.g. a notebook's) alone
 
     from .io import atomic_write
 
-    fig, ax = plt.subplots(figsize=(7, 4))
+    fig = Figure(figsize=(7, 4))
+    ax = fig.subplots()
     ax.plot(steps, returns, color="0.8", lw=0.8, label="episode return")
     ax.plot(steps, rolling_mean(returns, window), color="C0", lw=2, label=f"return (mean of {window})")
     ax.plot(steps, rolling_mean(success, window), color="C2", lw=1.5, ls="--", label="success rate")
@@ -43,5 +41,4 @@ def plot_learning_curve(steps: Sequence[float], returns: Sequence[float], succes
     ax.legend(loc="lower right", fontsize=8)
     fig.tight_layout()
     atomic_write(path, lambda fh: fig.savefig(fh, format="png", dpi=110))
-    plt.close(fig)
     return Path(path)

@@ -193,12 +193,10 @@ def curves(runs: list[RunSummary], task: str, variants: list[str], bins: int = 4
 
 def _plot(task: str, data: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]], labels: dict[str, str],
           path: Path) -> Path:
-    import matplotlib
+    from matplotlib.figure import Figure   # no pyplot: leaves the caller's backend alone
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7, 4))
+    fig = Figure(figsize=(7, 4))
+    ax = fig.subplots()
     for i, (v, (x, m, se)) in enumerate(data.items()):
         ax.plot(x, m, color=f"C{i % 10}", lw=1.8, label=labels.get(v, v))
         ax.fill_between(x, m - se, m + se, color=f"C{i % 10}", alpha=0.2, lw=0)
@@ -209,7 +207,6 @@ def _plot(task: str, data: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]],
     ax.legend(fontsize=7, loc="best")
     fig.tight_layout()
     atomic_write(path, lambda fh: fig.savefig(fh, format="png", dpi=110))
-    plt.close(fig)
     return path
 
 
