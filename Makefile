@@ -21,8 +21,9 @@ install: $(STAMP)
 
 # Main job: train HUBS-GO on KeyDoor with the default budget and print the learned sub-goal sets (G*).
 demo: $(STAMP)
-	$(BIN)/hubsgo train keydoor --agent hubsgo --seed 0 --out runs/demo-keydoor
-	$(BIN)/hubsgo subgoals runs/demo-keydoor
+	$(BIN)/hubsgo train keydoor --agent hubsgo --seed 0 --out runs/demo-keydoor \
+		$$(test -f runs/demo-keydoor/checkpoint.pt && echo --resume)
+	$(BIN)/hubsgo evaluate runs/demo-keydoor --episodes 10
 
 # The CI suite: every part (critic, MiniGrid, robosuite, CLI, notebooks), slow/gpu tests excluded.
 test: $(STAMP)

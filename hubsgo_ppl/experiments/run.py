@@ -71,7 +71,7 @@ def _critic_from_config(resolved: dict[str, Any]) -> Any:
 def resolve(cfg: RunConfig) -> dict[str, Any]:
     """Everything a run needs, as plain data (written to config.yaml and into checkpoints)."""
     info = get_task(cfg.task)
-    hyper = preset(info.family)
+    hyper = preset(info.family, info.name)
     if cfg.steps is not None:
         if cfg.steps <= 0:
             raise RunError(f"--steps must be positive, got {cfg.steps}")

@@ -29,14 +29,16 @@ SMOKE = ["env.horizon=100", "loop.option_steps=25", "high.batch_size=8", "high.l
 def test_hubsgo_scripted_smoke_run(task, tmp_path):
     out = tmp_path / task
     summary = train(RunConfig(task=task, steps=400, seed=0, overrides=SMOKE), out, progress=False)
-    assert summary["finished"] and summary["env_steps"] >= 400 and summary["episodes"] == 4
+    assert summary["finished"] and summary["env_steps"] >= 400 and summary["episodes"] >= 4
     for name in ("config.yaml", "metrics.csv", "critic_history.csv", "checkpoint.pt", "subgoals.json",
                  "learning_curve.png"):
         assert (out / name).is_file(), name
     rows = read_csv_rows(out / "metrics.csv")
-    assert [int(r["episode"]) for r in rows] == [0, 1, 2, 3]
+    assert [int(r["episode"]) for r in rows] == list(range(summary["episodes"]))
+    assert sum(int(r["length"]) for r in rows) == summary["env_steps"]
+    # an episode ends at the horizon (100) or on success; an option at 25 steps or its sub-goal
     assert all(int(r["length"]) == 100 or int(r["success"]) for r in rows)
-    assert sum(int(r["options"]) for r in rows) >= 4 * 100 // 25
+    assert all(int(r["options"]) >= -(-int(r["length"]) // 25) for r in rows)
     assert any(r.get("critic/loss") not in (None, "") for r in rows), "the critic never updated"
 
     _, env, agent, _ = load_run(out)
