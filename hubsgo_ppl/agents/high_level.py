@@ -2,18 +2,19 @@
 
 Its TD target takes the max over an allowed set, Eq. 2:
 ``y = r + γ^k max_{g' ∈ M} Q(s', g'; θ⁻)`` with M = (Ĝt for HUBS-GO, G0 for h-DQN) ∩ not-yet-achieved.
-The same minibatch, as a :class:`HighLevelBatch`, feeds the critic's update (Algorithm 1, lines 9-11).
+The same minibatch, as a :class:`~hubsgo_ppl.infer.critic.TDBatch`, feeds the critic's update (Algorithm 1, lines 9-11).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import torch
 from torch import nn
 
+from ..infer.critic import TDBatch
 from .buffers import ReplayBuffer
 from .nets import mlp
 
@@ -40,26 +41,9 @@ def masked_max(values: torch.Tensor, mask: torch.Tensor, empty: float = 0.0) -> 
     return torch.where(mask.any(dim=-1), m, torch.full_like(m, empty))
 
 
-@dataclass
-class HighLevelBatch:
-    """A high-level minibatch with the quantities the critic's residuals need (Eq. 2)."""
-
-    q_taken: torch.Tensor      # (B,) Q(s, g), detached
-    q_next: torch.Tensor       # (B, N) Q_target(s', ·), detached
-    reward: torch.Tensor       # (B,)
-    discount: torch.Tensor     # (B,) γ^k · (1 − terminated)
-    available: torch.Tensor    # (B, N) bool: sub-goals selectable at s'
-    extras: dict[str, Any] = field(default_factory=dict)
-
-    def residuals(self, w: torch.Tensor) -> torch.Tensor:
-        """y_Ĝ(w) − Q(s, g) for indicator configurations ``w`` (..., N) → (..., B).
-
-        Filtering is a tensor mask (never Python control flow on ``w``), so TraceGraph_ELBO keeps the
-        dependence of the likelihood on w. An empty allowed set bootstraps 0.
-        """
-        mask = (w.unsqueeze(-2) > 0.5) & self.available            # (..., B, N)
-        y = self.reward + self.discount * masked_max(self.q_next, mask)
-        return y - self.q_taken
+# The high-level minibatch handed to the filter is the critic's own TDBatch (Eq. 2, with the
+# not-yet-achieved mask as ``available``), so the residuals are computed in one place.
+HighLevelBatch = TDBatch
 
 
 class HighLevelDQN:

@@ -93,17 +93,24 @@ class TDBatch:
     """One minibatch of B high-level transitions, for the set-conditioned TD target of Eq. 2.
 
     ``q_taken``: Q(s_t, g_t) (B,); ``q_next``: Q(s_{t+k}, g') for every candidate g' (B, N);
-    ``reward``: the high-level reward (B,); ``discount``: gamma^k * (1 - done) (B,).
-    Tensors are detached on construction: the critic never trains Q.
+    ``reward``: the high-level reward (B,); ``discount``: gamma^k * (1 - done) (B,);
+    ``available`` (optional, bool (B, N)): the sub-goals selectable at s_{t+k} (e.g. not yet achieved);
+    the max of Eq. 2 runs over G(w) ∩ available. Tensors are detached on construction: the critic never
+    trains Q.
     """
 
     q_taken: torch.Tensor
     q_next: torch.Tensor
     reward: torch.Tensor
     discount: torch.Tensor
+    available: torch.Tensor | None = None
 
     def __post_init__(self):
+        if self.available is not None:
+            self.available = torch.as_tensor(self.available).detach().bool()
         for f in fields(self):
+            if f.name == "available":
+                continue
             v = getattr(self, f.name)
             if not isinstance(v, torch.Tensor):
                 v = torch.as_tensor(v, dtype=torch.float32)
@@ -114,7 +121,12 @@ class TDBatch:
         for name in ("q_taken", "reward", "discount"):
             if getattr(self, name).shape != (b,):
                 raise ValueError(f"TDBatch.{name} must have shape ({b},) to match q_next (B={b}), got {tuple(getattr(self, name).shape)}")
+        if self.available is not None and self.available.shape != self.q_next.shape:
+            raise ValueError(f"TDBatch.available must have q_next's shape {tuple(self.q_next.shape)}, "
+                             f"got {tuple(self.available.shape)}")
         for f in fields(self):
+            if f.name == "available":
+                continue
             if not bool(torch.isfinite(getattr(self, f.name)).all()):
                 raise ValueError(f"TDBatch.{f.name} has NaN or inf entries; check the Q-network outputs/rewards")
 
@@ -133,6 +145,8 @@ class TDBatch:
         # Provenance is moved from w to the result in one step (same dependency, far fewer tagged ops).
         w, prov = untrack(w)
         selected = w.unsqueeze(-2) > 0.5  # (..., 1, N)
+        if self.available is not None:
+            selected = selected & self.available  # (..., B, N)
         best = torch.where(selected, self.q_next, -math.inf).amax(-1)  # (..., B)
         bootstrap = torch.where(selected.any(-1), best, 0.0)
         return retrack(self.reward + self.discount * bootstrap - self.q_taken, prov)
