@@ -44,7 +44,21 @@ class LoopConfig:
     filter_end: float = 1.0
     filter_fraction: float = 0.5
     eval_filter: float = 1.0                    # greedy evaluation chooses from Ĝt with this probability
-    critic_every: int = 1                       # high-level updates per critic update (1 = Algorithm 1)
+    # h-DQN's per-goal annealing (Kulkarni et al. 2016): the low level's ε for goal g is at least
+    # min(low_explore_cap, 1 - its recent success rate on g), so goals it cannot reach yet keep being
+    # explored after the schedule has decayed (the cap keeps a failing goal from locking ε at 1).
+    # Off by default: on KeyDoor it lowered the mean training return (docs/results.md)
+    low_explore_adaptive: bool = False
+    low_explore_cap: float = 0.5
+    success_rate_alpha: float = 0.05            # rate of the per-goal success-rate moving average
+    critic_every: int = 1                       # high-level updates pooled into one critic update
+    filter_refresh: str = "option"              # when the loop reads Ĝt: every "option" or once per "episode"
+
+    def __post_init__(self):
+        if self.filter_refresh not in ("option", "episode"):
+            raise ValueError(f"loop.filter_refresh must be 'option' or 'episode', got {self.filter_refresh!r}")
+        if int(self.critic_every) < 1:
+            raise ValueError(f"loop.critic_every must be a positive integer, got {self.critic_every!r}")
 
 
 @dataclass
@@ -90,6 +104,9 @@ class HRLLoop:
         self._low_explore = LinearSchedule(config.low_explore_start, config.low_explore_end,
                                            config.low_explore_fraction)
         self._filter = LinearSchedule(config.filter_start, config.filter_end, config.filter_fraction)
+        self.success_rate = np.zeros(len(self.names))   # per-goal moving average of option success
+        self._pending: list = []                # high-level minibatches waiting for the next critic update
+        self._ghat: np.ndarray | None = None    # Ĝt as the loop sees it (refreshed per option or per episode)
 
     # -- one episode ---------------------------------------------------------------------------------
     def progress(self) -> float:
@@ -97,7 +114,9 @@ class HRLLoop:
 
     def _allowed(self, achieved: np.ndarray, filter_eps: float) -> np.ndarray:
         base = ~achieved if (~achieved).any() else np.ones_like(achieved)
-        ghat = self.filter.allowed()
+        if self.cfg.filter_refresh == "option":
+            self._ghat = self.filter.allowed()
+        ghat = self._ghat
         if ghat is not None and self.rng.random() < filter_eps:
             restricted = base & ghat
             if restricted.any():
@@ -120,6 +139,7 @@ class HRLLoop:
                 sums[k] = sums.get(k, 0.0) + v
                 counts[k] = counts.get(k, 0) + 1
 
+        self._ghat = self.filter.allowed()          # with filter_refresh="episode", Ĝt holds all episode
         explore = self._explore(self.progress()) if train else 0.0
         low_explore = self._low_explore(self.progress()) if train else 0.0
         filter_eps = self._filter(self.progress()) if train else cfg.eval_filter
@@ -136,8 +156,11 @@ class HRLLoop:
                 self.low.begin_option()
             s0, R, k = obs, 0.0, 0
             terminated = truncated = False
+            goal_explore = low_explore
+            if train and cfg.low_explore_adaptive:
+                goal_explore = max(low_explore, min(cfg.low_explore_cap, 1.0 - float(self.success_rate[g])))
             while k < cfg.option_steps:
-                action = self.low.act(obs, g, low_explore, env)
+                action = self.low.act(obs, g, goal_explore, env)
                 next_obs, reward, terminated, truncated, info = env.step(action)
                 next_achieved = np.asarray(info["subgoals"], dtype=bool)
                 if train and self.low.learns:
@@ -152,6 +175,9 @@ class HRLLoop:
                 if terminated or truncated or achieved[g]:
                     break
             options += 1
+            if train:
+                a = cfg.success_rate_alpha
+                self.success_rate[g] = (1 - a) * self.success_rate[g] + a * float(achieved[g])
             success = success or bool(info.get("is_success", False))
             done = terminated or truncated
             if train:
@@ -163,9 +189,17 @@ class HRLLoop:
                     target = None if ghat is None else torch.as_tensor(ghat)
                     stats, batch = self.high.update(target)
                     record(stats)
-                    if self.high.updates % max(cfg.critic_every, 1) == 0:
-                        record(self.filter.update(batch))
+                    self._pending.append(batch)
+                    if len(self._pending) >= cfg.critic_every:
+                        pooled = self._pending[0] if len(self._pending) == 1 else type(batch).cat(self._pending)
+                        self._pending = []
+                        record(self.filter.update(pooled))
         if train:
+            # the pool never spans episodes, so a checkpoint (written between episodes) holds all state
+            if self._pending:
+                record(self.filter.update(self._pending[0] if len(self._pending) == 1
+                                          else type(self._pending[0]).cat(self._pending)))
+                self._pending = []
             self.episodes += 1
         return EpisodeStats(episode=ep, env_steps=self.env_steps, ret=ret, length=length, success=success,
                             options=options, explore_eps=explore, filter_eps=filter_eps, chosen=chosen,
@@ -179,7 +213,8 @@ class HRLLoop:
     def state_dict(self) -> dict[str, Any]:
         s = {"env_steps": self.env_steps, "episodes": self.episodes,
              "rng": self.rng.bit_generator.state, "high": self.high.state_dict(),
-             "high_rng": self.high.rng.bit_generator.state, "filter": self.filter.state_dict()}
+             "high_rng": self.high.rng.bit_generator.state, "filter": self.filter.state_dict(),
+             "success_rate": self.success_rate.copy()}
         if self.low.learns:
             s["low"] = self.low.state_dict()
             s["low_rng"] = self.low.rng.bit_generator.state
@@ -191,6 +226,8 @@ class HRLLoop:
         self.high.load_state_dict(s["high"])
         self.high.rng.bit_generator.state = s["high_rng"]
         self.filter.load_state_dict(s["filter"])
+        if "success_rate" in s:
+            self.success_rate = np.asarray(s["success_rate"], dtype=float).copy()
         if self.low.learns:
             self.low.load_state_dict(s["low"])
             self.low.rng.bit_generator.state = s["low_rng"]

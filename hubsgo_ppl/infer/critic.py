@@ -97,6 +97,8 @@ class TDBatch:
     ``available`` (optional, bool (B, N)): the sub-goals selectable at s_{t+k} (e.g. not yet achieved);
     the max of Eq. 2 runs over G(w) ∩ available. Tensors are detached on construction: the critic never
     trains Q.
+    ``weight`` scales the batch's log-likelihood (Eq. 4) in the ELBO: :meth:`cat` pools K minibatches
+    into one update at weight 1/K, so the posterior an update aims at stays that of one minibatch.
     """
 
     q_taken: torch.Tensor
@@ -104,12 +106,33 @@ class TDBatch:
     reward: torch.Tensor
     discount: torch.Tensor
     available: torch.Tensor | None = None
+    weight: float = 1.0
+
+    @classmethod
+    def cat(cls, batches: "list[TDBatch]") -> "TDBatch":
+        """Pool minibatches into one batch whose likelihood counts as their mean (weight / K)."""
+        if not batches:
+            raise ValueError("TDBatch.cat needs at least one batch")
+        masks = [b.available for b in batches]
+        if any(m is None for m in masks) and not all(m is None for m in masks):
+            raise ValueError("TDBatch.cat: either every batch has an `available` mask or none has")
+        return cls(
+            q_taken=torch.cat([b.q_taken for b in batches]),
+            q_next=torch.cat([b.q_next for b in batches]),
+            reward=torch.cat([b.reward for b in batches]),
+            discount=torch.cat([b.discount for b in batches]),
+            available=None if masks[0] is None else torch.cat(masks),
+            weight=sum(b.weight for b in batches) / len(batches) ** 2,
+        )
 
     def __post_init__(self):
+        self.weight = float(self.weight)
+        if not (math.isfinite(self.weight) and self.weight > 0):
+            raise ValueError(f"TDBatch.weight must be a positive number, got {self.weight!r}")
         if self.available is not None:
             self.available = torch.as_tensor(self.available).detach().bool()
         for f in fields(self):
-            if f.name == "available":
+            if f.name in ("available", "weight"):
                 continue
             v = getattr(self, f.name)
             if not isinstance(v, torch.Tensor):
@@ -125,7 +148,7 @@ class TDBatch:
             raise ValueError(f"TDBatch.available must have q_next's shape {tuple(self.q_next.shape)}, "
                              f"got {tuple(self.available.shape)}")
         for f in fields(self):
-            if f.name == "available":
+            if f.name in ("available", "weight"):
                 continue
             if not bool(torch.isfinite(getattr(self, f.name)).all()):
                 raise ValueError(f"TDBatch.{f.name} has NaN or inf entries; check the Q-network outputs/rewards")
@@ -218,15 +241,16 @@ class SubgoalCritic:
 
     # -- Pyro model and guide ------------------------------------------------------------------
 
-    def _model(self, residual_fn: Callable[[torch.Tensor], torch.Tensor]) -> None:
+    def _model(self, residual_fn: Callable[[torch.Tensor], torch.Tensor], weight: float = 1.0) -> None:
         w = pyro.sample("w", self._prior_dist)
         r = residual_fn(w)
         self._check_residuals(r, w)
         r, prov = untrack(r)
         lik = WithProvenance(self.likelihood.distribution(r).to_event(1), prov)
-        pyro.sample("td", lik, obs=torch.zeros(r.shape))
+        with pyro.poutine.scale(scale=weight):
+            pyro.sample("td", lik, obs=torch.zeros(r.shape))
 
-    def _guide(self, residual_fn) -> None:
+    def _guide(self, residual_fn, weight: float = 1.0) -> None:
         cfg = self.config
         d = PairwiseMRF(
             pyro.param("theta"),
@@ -262,21 +286,22 @@ class SubgoalCritic:
 
     # -- training ----------------------------------------------------------------------------
 
-    def _as_fn(self, residual_fn) -> Callable[[torch.Tensor], torch.Tensor]:
+    def _as_fn(self, residual_fn) -> tuple[Callable[[torch.Tensor], torch.Tensor], float]:
+        """The residual function and the likelihood weight (a TDBatch's ``weight``, else 1)."""
         if isinstance(residual_fn, TDBatch):
             if residual_fn.n != self.n:
                 raise ValueError(f"TDBatch has {residual_fn.n} sub-goal columns but the critic has N = {self.n}")
-            return residual_fn.residuals
+            return residual_fn.residuals, residual_fn.weight
         if not callable(residual_fn):
             raise TypeError(f"update() takes a TDBatch or a callable residual_fn, got {type(residual_fn).__name__}")
-        return residual_fn
+        return residual_fn, 1.0
 
     def _loss_and_grads(self, residual_fn) -> float:
-        fn = self._as_fn(residual_fn)
+        fn, weight = self._as_fn(residual_fn)
         self._theta.grad = None
         self._coupling.grad = None
         with pyro.get_param_store().scope(state=self._param_state):
-            loss = self._elbo.loss_and_grads(self._model, self._guide, fn)
+            loss = self._elbo.loss_and_grads(self._model, self._guide, fn, weight)
         self._last_samples = self._chains
         if not math.isfinite(loss):
             raise FloatingPointError(

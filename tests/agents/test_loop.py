@@ -19,12 +19,16 @@ class FixedSetFilter:
     def __init__(self, mask):
         self.mask = np.asarray(mask, dtype=bool)
         self.updates = 0
+        self.rows = 0          # transitions seen over all updates
+        self.weights = []
 
     def allowed(self):
         return self.mask
 
     def update(self, batch):
         self.updates += 1
+        self.rows += batch.q_next.shape[0]
+        self.weights.append(batch.weight)
         return {"critic/loss": 1.0}
 
     def state_dict(self):
@@ -43,7 +47,7 @@ def _loop(agent="hdqn", steps=600, extra=()):
 
 
 def test_allowed_set_follows_filter_eps_and_never_offers_achieved_subgoals():
-    loop = _loop()
+    loop = _loop(extra=["loop.filter_refresh=option"])     # Ĝt read at every choice
     loop.filter = FixedSetFilter([True, True, False, False, True])
     achieved = np.array([True, False, False, False, False])
     only_ghat = loop._allowed(achieved, filter_eps=1.0)
@@ -66,12 +70,40 @@ def test_filter_is_updated_once_per_high_level_update_or_every_k():
     while loop.env_steps < 400:
         loop.run_episode(train=True)
     assert loop.high.updates > 0 and filt.updates == loop.high.updates
+    assert set(filt.weights) == {1.0}
+    # critic_every = 4 pools four minibatches per critic update; a pool never spans episodes
     loop4 = _loop(steps=400, extra=["loop.critic_every=4"])
     filt4 = FixedSetFilter([True] * 5)
     loop4.filter = filt4
+    expected = 0
     while loop4.env_steps < 400:
+        before = loop4.high.updates
         loop4.run_episode(train=True)
-    assert filt4.updates == loop4.high.updates // 4
+        expected += -(-(loop4.high.updates - before) // 4)
+    assert loop4.high.updates > 8 and filt4.updates == expected < loop4.high.updates
+    assert filt4.rows == loop4.high.updates * loop4.high.cfg.batch_size    # every minibatch seen once
+    assert all(w == pytest.approx(1 / round(1 / w)) for w in filt4.weights) and min(filt4.weights) == 0.25
+
+
+def test_filter_refresh_per_episode_holds_ghat_for_the_whole_episode():
+    class Flipping(FixedSetFilter):
+        def allowed(self):                       # a new Ĝt after every read
+            self.reads = getattr(self, "reads", 0) + 1
+            return np.roll(self.mask, self.reads)
+
+    for refresh, max_sets in (("episode", 1), ("option", None)):
+        loop = _loop(extra=[f"loop.filter_refresh={refresh}"])
+        loop.filter = Flipping([True, False, False, False, False])
+        loop._filter = lambda progress: 1.0
+        loop.high.select = lambda obs, allowed, eps: int(np.flatnonzero(allowed)[0])
+        stats = loop.run_episode(train=True)
+        assert stats.options > 2
+        if max_sets:
+            assert len(set(stats.chosen)) == max_sets
+        else:
+            assert len(set(stats.chosen)) > 1
+    with pytest.raises(ValueError, match="filter_refresh"):
+        _loop(extra=["loop.filter_refresh=sometimes"])
 
 
 def test_options_end_on_achievement_and_chosen_subgoals_come_from_the_allowed_set():
@@ -90,3 +122,33 @@ def test_eval_episode_does_not_advance_training_counters():
     before = (loop.env_steps, loop.episodes, loop.high.updates)
     loop.run_episode(train=False, seed=123)
     assert (loop.env_steps, loop.episodes, loop.high.updates) == before
+
+
+def test_low_level_exploration_is_annealed_per_goal_by_success_rate():
+    """h-DQN's adaptive ε: a goal the low level cannot reach yet keeps ε near 1; a mastered one gets the schedule's."""
+    rates = np.array([1.0, 0.0, 0.75, 1.0, 1.0])
+    for adaptive in (True, False):
+        for g in (0, 1, 2):
+            loop = _loop(extra=[f"loop.low_explore_adaptive={str(adaptive).lower()}"])
+            calls = []
+            act = loop.low.act
+            loop.low.act = lambda obs, goal, eps, env, act=act: calls.append((goal, eps)) or act(obs, goal, eps, env)
+            loop._low_explore = lambda progress: 0.1
+            loop.high.select = lambda obs, allowed, eps, g=g: g
+            loop.success_rate[:] = rates
+            loop.run_episode(train=True)
+            first_goal, first_eps = calls[0]
+            assert first_goal == g
+            assert first_eps == pytest.approx(max(0.1, min(0.5, 1.0 - rates[g])) if adaptive else 0.1)
+            # the rate is a moving average of the options' outcomes, and a checkpoint carries it
+            assert loop.success_rate[g] != rates[g] or rates[g] in (0.0, 1.0)
+            other = _loop()
+            other.load_state_dict(loop.state_dict())
+            assert np.array_equal(other.success_rate, loop.success_rate)
+    # greedy evaluation never explores
+    loop = _loop()
+    calls = []
+    act = loop.low.act
+    loop.low.act = lambda obs, goal, eps, env: calls.append(eps) or act(obs, goal, eps, env)
+    loop.run_episode(train=False)
+    assert set(calls) == {0.0}

@@ -30,8 +30,8 @@ def td_batch(n, seed):
     return TDBatch(q_taken=q[:, 0] + 0.5, q_next=q, reward=torch.rand(6, generator=g), discount=torch.full((6,), 0.9))
 
 
-def exact_loss(critic, fn):
-    """L(lambda) = E_q[-log p(y | w)] + KL(q || p) by enumeration (differentiable in theta, J)."""
+def exact_loss(critic, fn, weight=1.0):
+    """L(lambda) = E_q[-weight * log p(y | w)] + KL(q || p) by enumeration (differentiable in theta, J)."""
     sd = critic.state_dict()
     theta = sd["theta"].clone().requires_grad_(True)
     coupling = sd["coupling"].clone().requires_grad_(True)
@@ -40,7 +40,7 @@ def exact_loss(critic, fn):
     lq = q.log_prob(s)
     loglik = critic.likelihood.distribution(fn(s)).log_prob(torch.zeros(1)).sum(-1)
     logp = critic.prior.distribution().log_prob(s)
-    loss = (lq.exp() * (-loglik - logp + lq)).sum()
+    loss = (lq.exp() * (-weight * loglik - logp + lq)).sum()
     g_theta, g_coupling = torch.autograd.grad(loss, [theta, coupling])
     return float(loss.detach()), torch.cat([g_theta, g_coupling])
 
@@ -92,6 +92,23 @@ def test_gradient_with_residual_fn_of_torch_ops():
     _, exact = exact_loss(critic, keydoor_residuals)
     est = mean_gradient(critic, keydoor_residuals, k=150)
     assert float((est - exact).norm() / exact.norm()) < GRAD_TOL
+
+
+def test_pooled_batches_count_as_their_mean():
+    """TDBatch.cat of K minibatches (critic_every = K) aims at the posterior of one minibatch: weight 1/K."""
+    parts = [td_batch(4, seed=s) for s in (1, 2, 3)]
+    pooled = TDBatch.cat(parts)
+    assert pooled.weight == pytest.approx(1 / 3) and pooled.q_next.shape == (18, 4)
+    critic = SubgoalCritic(KEYDOOR, seed=3)
+    set_params(critic, seed=7)
+    _, exact = exact_loss(critic, pooled.residuals, weight=1 / 3)
+    _, unweighted = exact_loss(critic, pooled.residuals, weight=1.0)
+    est = mean_gradient(critic, pooled, k=150)
+    assert float((est - exact).norm() / exact.norm()) < GRAD_TOL
+    assert float((unweighted - exact).norm() / exact.norm()) > 3 * GRAD_TOL   # the weight matters here
+    with pytest.raises(ValueError, match="available"):
+        TDBatch.cat([parts[0], TDBatch(parts[1].q_taken, parts[1].q_next, parts[1].reward, parts[1].discount,
+                                       available=torch.ones(6, 4, dtype=torch.bool))])
 
 
 def test_python_control_flow_residual_is_refused():
