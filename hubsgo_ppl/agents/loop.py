@@ -15,13 +15,14 @@ per-episode statistics and leaves logging, progress bars and checkpoints to ``ex
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 import torch
 
+from ..infer.critic import TDBatch
 from .filters import SubgoalFilter
 from .high_level import HighLevelDQN
 from .schedules import LinearSchedule
@@ -51,12 +52,18 @@ class LoopConfig:
     low_explore_adaptive: bool = False
     low_explore_cap: float = 0.5
     success_rate_alpha: float = 0.05            # rate of the per-goal success-rate moving average
+    # "first_reward": the three ε schedules wait at their start values until the first extrinsic
+    # reward, then run over the rest of the budget (with no reward seen there is nothing to exploit,
+    # and decaying exploration only makes a late first success less likely)
+    schedule_from: str = "start"
     critic_every: int = 1                       # high-level updates pooled into one critic update
     filter_refresh: str = "option"              # when the loop reads Ĝt: every "option" or once per "episode"
 
     def __post_init__(self):
         if self.filter_refresh not in ("option", "episode"):
             raise ValueError(f"loop.filter_refresh must be 'option' or 'episode', got {self.filter_refresh!r}")
+        if self.schedule_from not in ("start", "first_reward"):
+            raise ValueError(f"loop.schedule_from must be 'start' or 'first_reward', got {self.schedule_from!r}")
         if int(self.critic_every) < 1:
             raise ValueError(f"loop.critic_every must be a positive integer, got {self.critic_every!r}")
 
@@ -104,6 +111,7 @@ class HRLLoop:
         self._low_explore = LinearSchedule(config.low_explore_start, config.low_explore_end,
                                            config.low_explore_fraction)
         self._filter = LinearSchedule(config.filter_start, config.filter_end, config.filter_fraction)
+        self.first_reward_step: int | None = None       # env step of the first extrinsic reward
         self.success_rate = np.zeros(len(self.names))   # per-goal moving average of option success
         self._pending: list = []                # high-level minibatches waiting for the next critic update
         self._ghat: np.ndarray | None = None    # Ĝt as the loop sees it (refreshed per option or per episode)
@@ -111,6 +119,16 @@ class HRLLoop:
     # -- one episode ---------------------------------------------------------------------------------
     def progress(self) -> float:
         return self.env_steps / max(self.cfg.total_steps, 1)
+
+    def schedule_progress(self) -> float:
+        """Where the ε schedules are: ``progress()``, or with ``schedule_from="first_reward"`` the
+        fraction of the budget left at the first extrinsic reward that has passed since (0 before it)."""
+        if self.cfg.schedule_from == "start":
+            return self.progress()
+        if self.first_reward_step is None:
+            return 0.0
+        left = max(self.cfg.total_steps - self.first_reward_step, 1)
+        return (self.env_steps - self.first_reward_step) / left
 
     def _allowed(self, achieved: np.ndarray, filter_eps: float) -> np.ndarray:
         base = ~achieved if (~achieved).any() else np.ones_like(achieved)
@@ -140,15 +158,14 @@ class HRLLoop:
                 counts[k] = counts.get(k, 0) + 1
 
         self._ghat = self.filter.allowed()          # with filter_refresh="episode", Ĝt holds all episode
-        explore = self._explore(self.progress()) if train else 0.0
-        low_explore = self._low_explore(self.progress()) if train else 0.0
-        filter_eps = self._filter(self.progress()) if train else cfg.eval_filter
+        explore = self._explore(self.schedule_progress()) if train else 0.0
+        low_explore = self._low_explore(self.schedule_progress()) if train else 0.0
+        filter_eps = self._filter(self.schedule_progress()) if train else cfg.eval_filter
         done = False
         while not done:
             if train:
-                explore = self._explore(self.progress())
-                low_explore = self._low_explore(self.progress())
-                filter_eps = self._filter(self.progress())
+                p = self.schedule_progress()
+                explore, low_explore, filter_eps = self._explore(p), self._low_explore(p), self._filter(p)
             allowed = self._allowed(achieved, filter_eps)
             g = self.high.select(obs, allowed, explore)
             chosen.append(self.names[g])
@@ -171,6 +188,8 @@ class HRLLoop:
                 length += 1
                 if train:
                     self.env_steps += 1
+                    if reward > 0 and self.first_reward_step is None:
+                        self.first_reward_step = self.env_steps
                 obs, achieved = next_obs, next_achieved
                 if terminated or truncated or achieved[g]:
                     break
@@ -191,15 +210,10 @@ class HRLLoop:
                     record(stats)
                     self._pending.append(batch)
                     if len(self._pending) >= cfg.critic_every:
-                        pooled = self._pending[0] if len(self._pending) == 1 else type(batch).cat(self._pending)
+                        pooled = self._pending[0] if len(self._pending) == 1 else TDBatch.cat(self._pending)
                         self._pending = []
                         record(self.filter.update(pooled))
         if train:
-            # the pool never spans episodes, so a checkpoint (written between episodes) holds all state
-            if self._pending:
-                record(self.filter.update(self._pending[0] if len(self._pending) == 1
-                                          else type(self._pending[0]).cat(self._pending)))
-                self._pending = []
             self.episodes += 1
         return EpisodeStats(episode=ep, env_steps=self.env_steps, ret=ret, length=length, success=success,
                             options=options, explore_eps=explore, filter_eps=filter_eps, chosen=chosen,
@@ -214,7 +228,9 @@ class HRLLoop:
         s = {"env_steps": self.env_steps, "episodes": self.episodes,
              "rng": self.rng.bit_generator.state, "high": self.high.state_dict(),
              "high_rng": self.high.rng.bit_generator.state, "filter": self.filter.state_dict(),
-             "success_rate": self.success_rate.copy()}
+             "success_rate": self.success_rate.copy(), "first_reward_step": self.first_reward_step,
+             # minibatches waiting for the next pooled critic update (the pool spans episodes)
+             "pending": [{f.name: getattr(b, f.name) for f in fields(b)} for b in self._pending]}
         if self.low.learns:
             s["low"] = self.low.state_dict()
             s["low_rng"] = self.low.rng.bit_generator.state
@@ -226,6 +242,8 @@ class HRLLoop:
         self.high.load_state_dict(s["high"])
         self.high.rng.bit_generator.state = s["high_rng"]
         self.filter.load_state_dict(s["filter"])
+        self.first_reward_step = s.get("first_reward_step")
+        self._pending = [TDBatch(**b) for b in s.get("pending", [])]
         if "success_rate" in s:
             self.success_rate = np.asarray(s["success_rate"], dtype=float).copy()
         if self.low.learns:

@@ -12,12 +12,15 @@ PRESETS: dict[str, dict[str, Any]] = {
         "steps": 15_000,                # FourRoom's measured budget; KeyDoor's is in TASK_PRESETS
         "low_level": "learned",
         "env": {},                      # keyword arguments of the env, e.g. max_steps
-        # critic_every 4: four high-level minibatches pooled per critic update (weight 1/4, so the same
+        # critic_every 8: eight high-level minibatches pooled per critic update (weight 1/8, so the same
         # posterior), which keeps the critic's overhead near the 1.15 target over whole runs;
         # filter_refresh episode: Ĝt is read once per episode, so a multi-modal critic (yellow or blue
         # route) does not switch routes mid-episode (docs/results.md)
         "loop": {"option_steps": 10, "explore_fraction": 0.3, "low_explore_fraction": 0.3,
-                 "filter_fraction": 0.5, "critic_every": 4, "filter_refresh": "episode"},
+                 "filter_fraction": 0.5, "critic_every": 8, "filter_refresh": "episode",
+                 # sparse reward: the ε schedules start at the first reward (random walk finds the
+                 # KeyDoor goal every ~4,000 steps; decayed ε before that left seeds stuck for 20k+ steps)
+                 "schedule_from": "first_reward"},
         "high": {"hidden": [128, 128], "lr": 1e-3, "batch_size": 64},
         "low": {"hidden": [128, 128], "lr": 5e-4, "batch_size": 128, "learning_starts": 1000},
         # flat baselines (Stable-Baselines3 keyword arguments; agents/flat.py). dqn and ddqn share "dqn".

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+import torch
 
 from hubsgo_ppl.agents.factory import build_agent
 from hubsgo_ppl.agents.presets import apply_overrides, preset
@@ -64,25 +65,30 @@ def test_allowed_set_follows_filter_eps_and_never_offers_achieved_subgoals():
 
 
 def test_filter_is_updated_once_per_high_level_update_or_every_k():
-    loop = _loop(steps=400)
+    loop = _loop(steps=400, extra=["loop.critic_every=1"])     # Algorithm 1 to the letter
     filt = FixedSetFilter([True] * 5)
     loop.filter = filt
     while loop.env_steps < 400:
         loop.run_episode(train=True)
     assert loop.high.updates > 0 and filt.updates == loop.high.updates
     assert set(filt.weights) == {1.0}
-    # critic_every = 4 pools four minibatches per critic update; a pool never spans episodes
+    # critic_every = 4 pools four minibatches per critic update, across episode boundaries
     loop4 = _loop(steps=400, extra=["loop.critic_every=4"])
     filt4 = FixedSetFilter([True] * 5)
     loop4.filter = filt4
-    expected = 0
     while loop4.env_steps < 400:
-        before = loop4.high.updates
         loop4.run_episode(train=True)
-        expected += -(-(loop4.high.updates - before) // 4)
-    assert loop4.high.updates > 8 and filt4.updates == expected < loop4.high.updates
-    assert filt4.rows == loop4.high.updates * loop4.high.cfg.batch_size    # every minibatch seen once
-    assert all(w == pytest.approx(1 / round(1 / w)) for w in filt4.weights) and min(filt4.weights) == 0.25
+    assert loop4.high.updates > 8 and filt4.updates == loop4.high.updates // 4
+    assert filt4.rows == 4 * filt4.updates * loop4.high.cfg.batch_size     # each minibatch seen once
+    assert set(filt4.weights) == {0.25}
+    # the minibatches still pending travel with the checkpoint
+    pending = loop4.high.updates % 4
+    other = _loop(steps=400, extra=["loop.critic_every=4"])
+    other.filter = FixedSetFilter([True] * 5)
+    other.load_state_dict(loop4.state_dict())
+    assert len(other._pending) == len(loop4._pending) == pending
+    for a, b in zip(other._pending, loop4._pending):
+        assert torch.equal(a.q_next, b.q_next) and torch.equal(a.available, b.available)
 
 
 def test_filter_refresh_per_episode_holds_ghat_for_the_whole_episode():
@@ -152,3 +158,36 @@ def test_low_level_exploration_is_annealed_per_goal_by_success_rate():
     loop.low.act = lambda obs, goal, eps, env: calls.append(eps) or act(obs, goal, eps, env)
     loop.run_episode(train=False)
     assert set(calls) == {0.0}
+
+
+def test_schedules_can_start_at_the_first_extrinsic_reward():
+    loop = _loop(steps=1000, extra=["loop.schedule_from=first_reward"])
+    loop.env_steps = 300
+    assert loop.first_reward_step is None and loop.schedule_progress() == 0.0
+    loop.first_reward_step = 200
+    assert loop.schedule_progress() == pytest.approx(100 / 800)
+    start = _loop(steps=1000, extra=["loop.schedule_from=start"])
+    start.env_steps = 300
+    assert start.schedule_progress() == pytest.approx(0.3)
+    # the loop records the env step of the first extrinsic reward (here a wrapper pays at step 25)
+    import gymnasium as gym
+
+    class PayAt(gym.Wrapper):
+        t = 0
+
+        def step(self, action):
+            obs, r, term, trunc, info = self.env.step(action)
+            PayAt.t += 1
+            return obs, (0.5 if PayAt.t == 25 else r), term, trunc, info
+
+    unpaid = _loop(steps=1000, extra=["loop.schedule_from=first_reward"])
+    assert unpaid.run_episode(train=True).explore_eps == 1.0      # no reward: ε stays at its start
+    loop = _loop(steps=1000, extra=["loop.schedule_from=first_reward"])
+    loop.env = PayAt(loop.env)
+    first = loop.run_episode(train=True)
+    assert loop.first_reward_step == 25 and first.explore_eps < 1.0
+    other = _loop(extra=["loop.schedule_from=first_reward"])
+    other.load_state_dict(loop.state_dict())
+    assert other.first_reward_step == loop.first_reward_step
+    with pytest.raises(ValueError, match="schedule_from"):
+        _loop(extra=["loop.schedule_from=later"])
