@@ -38,7 +38,9 @@ def _low_level(kind: str, env: gym.Env, n_goals: int, low_cfg: dict, gen: torch.
                rng: np.random.Generator):
     obs_dim = int(np.prod(env.observation_space.shape))
     if kind == "learned" and isinstance(env.action_space, gym.spaces.Discrete):
-        return GoalDQN(obs_dim, n_goals, int(env.action_space.n), _dc(GoalDQNConfig, low_cfg, "low"), gen, rng)
+        potential = getattr(env.unwrapped, "subgoal_potential", lambda: None)()
+        return GoalDQN(obs_dim, n_goals, int(env.action_space.n), _dc(GoalDQNConfig, low_cfg, "low"), gen, rng,
+                       potential=potential)
     if kind == "scripted":
         from .scripted_osc import ScriptedOSC
 

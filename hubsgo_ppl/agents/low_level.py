@@ -39,6 +39,9 @@ class GoalDQNConfig:
     train_every: int = 2           # env steps per gradient step
     target_tau: float = 0.01
     grad_clip: float = 10.0
+    # potential-based shaping of the intrinsic reward, r + shaping * (gamma * phi(s') - phi(s)), with the
+    # env's subgoal_potential (Ng et al. 1999: optimal policies unchanged); 0 turns it off
+    shaping: float = 0.0
 
 
 class GoalDQN:
@@ -47,8 +50,12 @@ class GoalDQN:
     learns = True
 
     def __init__(self, obs_dim: int, n_goals: int, n_actions: int, config: GoalDQNConfig,
-                 generator: torch.Generator, rng: np.random.Generator):
+                 generator: torch.Generator, rng: np.random.Generator, potential=None):
         self.cfg = config
+        if config.shaping and potential is None:
+            raise ValueError("low.shaping > 0 needs the env's subgoal_potential (symbolic observations); "
+                             "set low.shaping=0 or use obs_mode: symbolic")
+        self.potential = potential if config.shaping else None
         self.n_goals, self.n_actions = n_goals, n_actions
         self.rng = rng
         self.q = mlp(obs_dim, config.hidden, n_goals * n_actions, generator)
@@ -85,6 +92,9 @@ class GoalDQN:
         before, after = b["before"].bool(), b["after"].bool()
         reward = (after & ~before).float()                               # (B, N) intrinsic, per goal
         done = (reward > 0) | b["terminated"].bool()[:, None]
+        if self.potential is not None:                                   # phi = 0 at the end of an option
+            phi, phi_next = self.potential(b["obs"]), self.potential(b["next_obs"])
+            reward = reward + self.cfg.shaping * (self.cfg.gamma * (~done).float() * phi_next - phi)
         with torch.no_grad():
             q_next = self._q(self.q_target, b["next_obs"]).max(-1).values  # (B, N)
             y = reward + self.cfg.gamma * (~done).float() * q_next

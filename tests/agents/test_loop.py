@@ -191,3 +191,29 @@ def test_schedules_can_start_at_the_first_extrinsic_reward():
     assert other.first_reward_step == loop.first_reward_step
     with pytest.raises(ValueError, match="schedule_from"):
         _loop(extra=["loop.schedule_from=later"])
+
+
+def test_low_level_shaping_uses_the_env_potential_and_refuses_to_run_without_one():
+    import torch
+
+    from hubsgo_ppl.agents.low_level import GoalDQN, GoalDQNConfig
+
+    def low(shaping, potential):
+        cfg = GoalDQNConfig(hidden=(8,), batch_size=4, learning_starts=4, train_every=1, shaping=shaping)
+        return GoalDQN(6, 2, 3, cfg, torch.Generator().manual_seed(0), np.random.default_rng(0), potential=potential)
+
+    with pytest.raises(ValueError, match="subgoal_potential"):
+        low(1.0, None)
+    phi = lambda obs: torch.stack([-obs[..., 0], -obs[..., 1]], -1)      # noqa: E731
+    plain, shaped = low(0.0, phi), low(1.0, phi)
+    assert plain.potential is None and shaped.potential is phi
+    for agent in (plain, shaped):
+        for t in range(4):
+            o = np.full(6, t / 4, np.float32)
+            agent.observe(o, t % 3, o + 0.25, np.zeros(2, bool), np.zeros(2, bool), False)
+    assert plain.q[0].weight.ne(shaped.q[0].weight).any()      # the shaped reward changed the update
+    # the env side: symbolic KeyDoor observations give one potential per sub-goal
+    loop = _loop(extra=["low.shaping=1.0"])
+    assert loop.low.potential is not None
+    obs, _ = loop.env.reset(seed=0)
+    assert loop.low.potential(torch.as_tensor(obs)[None]).shape == (1, 5)

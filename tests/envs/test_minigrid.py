@@ -202,3 +202,27 @@ def test_rgb_render():
     env.reset(seed=0)
     frame = env.render()
     assert frame.shape == (13 * 8, 13 * 8, 3) and frame.dtype == np.uint8 and frame.std() > 0
+
+
+@pytest.mark.parametrize("task", ["keydoor", "fourroom"])
+def test_subgoal_potential_is_minus_manhattan_distance_to_each_target(task):
+    import torch
+
+    register()
+    env = make(task)
+    u = env.unwrapped
+    phi = u.subgoal_potential()
+    scale = u.grid.width + u.grid.height
+    rng = np.random.default_rng(0)
+    obs, _ = env.reset(seed=1)
+    for _ in range(200):
+        x, y = u.agent_pos
+        want = [-(abs(x - u.subgoal_target(i)[0]) + abs(y - u.subgoal_target(i)[1])) / scale
+                for i in range(len(u.subgoal_names)) if u.carrying is None]
+        got = phi(torch.as_tensor(obs)[None])[0]
+        if want:
+            assert got.tolist() == pytest.approx(want)
+        obs, _, term, trunc, _ = env.step(int(rng.integers(env.action_space.n)))
+        if term or trunc:
+            obs, _ = env.reset(seed=2)
+    assert make(task, obs_mode="image").unwrapped.subgoal_potential() is None

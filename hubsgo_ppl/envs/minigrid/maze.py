@@ -250,6 +250,29 @@ class MazeEnv(MiniGridEnv):
                         return int(obj.cur_pos[0]), int(obj.cur_pos[1])
         return target
 
+    def subgoal_potential(self):
+        """phi(obs) -> (B, N): minus the Manhattan distance from the agent's cell to each sub-goal's
+        catalogue target, over (width + height); read from symbolic observations (None for image ones).
+
+        The low level may use it for potential-based shaping (Ng et al. 1999), which leaves its optimal
+        policies unchanged; walls are not taken into account (the layout stays the learner's to discover).
+        """
+        if self.obs_mode != "symbolic":
+            return None
+        import torch
+
+        W, H = self.grid.width, self.grid.height
+        targets = torch.tensor([target for _, target, _ in self._preds], dtype=torch.float32)   # (N, 2)
+        off_y, scale = self._off_y, float(W + H)
+
+        def phi(obs: "torch.Tensor") -> "torch.Tensor":
+            x = obs[..., :W].argmax(-1).float()
+            y = obs[..., off_y:off_y + H].argmax(-1).float()
+            d = (x[..., None] - targets[:, 0]).abs() + (y[..., None] - targets[:, 1]).abs()
+            return -d / scale
+
+        return phi
+
     def symbolic_state(self) -> MazeState:
         """The hashable full state (position, direction, carried object, object cells, door states)."""
         carrying = -1
