@@ -17,12 +17,12 @@ PRESETS: dict[str, dict[str, Any]] = {
         # filter_refresh episode: Ĝt is read once per episode, so a multi-modal critic (yellow or blue
         # route) does not switch routes mid-episode (docs/results.md)
         "loop": {"option_steps": 10, "explore_fraction": 0.3, "low_explore_fraction": 0.3,
-                 "filter_fraction": 0.5, "critic_every": 8, "filter_refresh": "episode",
-                 # sparse reward: the ε schedules start at the first reward (random walk finds the
-                 # KeyDoor goal every ~4,000 steps; decayed ε before that left seeds stuck for 20k+ steps)
-                 "schedule_from": "first_reward"},
+                 "filter_fraction": 0.5, "critic_every": 8, "filter_refresh": "episode"},
         "high": {"hidden": [128, 128], "lr": 1e-3, "batch_size": 64},
-        "low": {"hidden": [128, 128], "lr": 5e-4, "batch_size": 128, "learning_starts": 1000},
+        # shaping: potential-based, towards each sub-goal's catalogue cell (MazeEnv.subgoal_potential);
+        # without it the low level saw a key pick-up every ~3,000 random steps and some KeyDoor seeds
+        # first reached the goal after 17,000-26,000 steps (docs/results.md)
+        "low": {"hidden": [128, 128], "lr": 5e-4, "batch_size": 128, "learning_starts": 1000, "shaping": 1.0},
         # flat baselines (Stable-Baselines3 keyword arguments; agents/flat.py). dqn and ddqn share "dqn".
         "dqn": {"learning_rate": 5e-4, "buffer_size": 100_000, "learning_starts": 1000, "batch_size": 64,
                 "train_freq": 4, "target_update_interval": 1000, "exploration_fraction": 0.3,
