@@ -7,7 +7,8 @@ Each high-level iteration:
 2. the high level picks g = argmax Q(s, g') over that set (ε-greedy while training);
 3. the low level acts until g is achieved, the env ends, or ``option_steps`` pass (lines 3-8);
 4. the transition (s, g, R, s', γ^k) goes to the high-level replay; the high level takes a TD step with
-   targets over Ĝt (Eq. 2), and the same minibatch drives the filter's update (lines 9-11).
+   targets over Ĝt (Eq. 2), and the same minibatch drives the filter's update (lines 9-11), pooled
+   with the previous ones every ``critic_every`` minibatches (``TDBatch.cat``, weight 1/K).
 
 The loop is the only place where an environment and the critic meet. It does no IO: it returns
 per-episode statistics and leaves logging, progress bars and checkpoints to ``experiments.run``.
