@@ -125,7 +125,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 def cmd_report(args: argparse.Namespace) -> int:
     from .experiments.report import write_report
 
-    paths = write_report(args.sweep_dir, out=args.out)
+    paths = write_report(args.sweep_dir, out=args.out, sweep=args.sweep)
     for kind, path in paths.items():
         print(f"{kind}: {path}")
     return 0
@@ -183,6 +183,8 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("report", help="tables (as the paper's Tables 1-2), learning curves and a CSV")
     r.add_argument("sweep_dir")
     r.add_argument("--out", help="report folder (default SWEEP_DIR/report)")
+    r.add_argument("--sweep", help="report only this grid's tasks, variants and seeds (a sweep .yaml or built-in "
+                                   "name), for a folder several sweeps ran into; default: the folder's sweep.yaml")
     r.set_defaults(func=cmd_report)
 
     k = sub.add_parser("tasks", help="list the tasks and their sub-goal catalogues")

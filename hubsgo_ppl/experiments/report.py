@@ -221,19 +221,34 @@ def _csv(rows: list[dict[str, Any]]) -> str:
     return buf.getvalue()
 
 
-def write_report(sweep_dir: str | Path, out: str | Path | None = None, bins: int = 40) -> dict[str, Path]:
+def write_report(sweep_dir: str | Path, out: str | Path | None = None, bins: int = 40,
+                 sweep: str | Path | None = None) -> dict[str, Path]:
     """Write ``results.md`` (tables), ``results.csv`` (per run and aggregated), ``curves.csv`` and one
-    ``curve_<task>.png`` per task into ``out`` (default ``SWEEP_DIR/report``). Returns the paths."""
+    ``curve_<task>.png`` per task into ``out`` (default ``SWEEP_DIR/report``). Returns the paths.
+
+    ``sweep`` (a sweep .yaml or built-in name) limits the report to that grid's tasks, variants and
+    seeds, for a folder that several sweeps have run into; by default the layout comes from the
+    folder's ``sweep.yaml`` (the last sweep run there) and every run found is reported.
+    """
     sweep_dir = Path(sweep_dir)
     if not sweep_dir.is_dir():
         raise FileNotFoundError(f"{sweep_dir}: no such sweep directory; pass the --out folder of `hubsgo sweep`")
     runs = collect(sweep_dir)
+    if sweep is not None:
+        from .sweep import load_sweep
+
+        spec, _ = load_sweep(sweep)
+        tasks, variants = [t.name for t in spec.tasks], [v.name for v in spec.variants]
+        labels = {v.name: v.label or v.name for v in spec.variants}
+        table = spec.table
+        runs = [r for r in runs if r.task in tasks and r.variant in variants and r.seed in spec.seeds]
     if not runs:
-        raise FileNotFoundError(f"{sweep_dir}: no runs with metrics (expected <task>/<variant>/seed<k>/metrics.csv); "
-                                "run `hubsgo sweep` first")
-    tasks, variants, labels, table = _layout(sweep_dir)
-    tasks += sorted({r.task for r in runs} - set(tasks))
-    variants += sorted({r.variant for r in runs} - set(variants))
+        raise FileNotFoundError(f"{sweep_dir}: no runs with metrics (expected <task>/<variant>/seed<k>/metrics.csv)"
+                                f"{' of the grid ' + str(sweep) if sweep is not None else ''}; run `hubsgo sweep` first")
+    if sweep is None:
+        tasks, variants, labels, table = _layout(sweep_dir)
+        tasks += sorted({r.task for r in runs} - set(tasks))
+        variants += sorted({r.variant for r in runs} - set(variants))
     out = Path(out) if out is not None else sweep_dir / "report"
     out.mkdir(parents=True, exist_ok=True)
     cells = aggregate(runs)

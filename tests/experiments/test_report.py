@@ -96,3 +96,24 @@ def test_report_errors_name_the_problem(tmp_path):
     (tmp_path / "empty").mkdir()
     with pytest.raises(FileNotFoundError, match="no runs with metrics"):
         write_report(tmp_path / "empty")
+
+
+def test_report_limited_to_one_grid_of_a_shared_folder(sweep_dir, tmp_path):
+    """--sweep: only that grid's tasks, variants and seeds, with its labels, whatever else ran there."""
+    root, _ = sweep_dir
+    grid = {"name": "subset", "table": "table1", "seeds": [0, 1],
+            "tasks": [{"name": "keydoor", "steps": 1000}],
+            "variants": [{"name": "hubsgo-specific", "label": "HS", "agent": "hubsgo"}]}
+    path = tmp_path / "subset.yaml"
+    path.write_text(yaml.safe_dump(grid))
+    paths = write_report(root, out=tmp_path / "rep", sweep=path)
+    ours = paths["table"].read_text().split("The paper's")[0]
+    avgs = [statistics.fmean(float(r["return"]) for r in csv.DictReader((root / "keydoor" / "hubsgo-specific" / f"seed{s}" / "metrics.csv").open()))
+            for s in (0, 1)]
+    line = next(l for l in ours.splitlines() if l.startswith("| HS |"))
+    m, s = map(float, re.fullmatch(r"(\S+) ± (\S+)", line.strip("|").split("|")[1].strip()).groups())
+    assert m == pytest.approx(statistics.fmean(avgs), abs=5e-5)
+    assert s == pytest.approx(statistics.stdev(avgs) / math.sqrt(2), abs=5e-5)
+    assert "fourroom" not in ours and "PPO" not in ours and "lonely" not in ours
+    with paths["csv"].open() as fh:
+        assert sum(r["level"] == "run" for r in csv.DictReader(fh)) == 2
