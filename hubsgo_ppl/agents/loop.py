@@ -159,9 +159,7 @@ class HRLLoop:
                 counts[k] = counts.get(k, 0) + 1
 
         self._ghat = self.filter.allowed()          # with filter_refresh="episode", Ĝt holds all episode
-        explore = self._explore(self.schedule_progress()) if train else 0.0
-        low_explore = self._low_explore(self.schedule_progress()) if train else 0.0
-        filter_eps = self._filter(self.schedule_progress()) if train else cfg.eval_filter
+        explore, low_explore, filter_eps = 0.0, 0.0, cfg.eval_filter     # greedy evaluation
         done = False
         while not done:
             if train:
@@ -211,8 +209,7 @@ class HRLLoop:
                     record(stats)
                     self._pending.append(batch)
                     if len(self._pending) >= cfg.critic_every:
-                        pooled = self._pending[0] if len(self._pending) == 1 else TDBatch.cat(self._pending)
-                        self._pending = []
+                        pooled, self._pending = TDBatch.cat(self._pending), []
                         record(self.filter.update(pooled))
         if train:
             self.episodes += 1

@@ -46,6 +46,9 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
+_KEYDOOR: dict[str, Any] = {"steps": 40_000, "low": {"shaping": 1.0},
+                            "loop": {"critic_every": 8, "filter_refresh": "episode"}}
+
 # Per-task settings merged over the family's, as measured for the arm tasks (docs/results.md).
 TASK_PRESETS: dict[str, dict[str, Any]] = {
     # KeyDoor (docs/results.md, session 2): at 15k steps exploration ends before most seeds first reach
@@ -55,10 +58,8 @@ TASK_PRESETS: dict[str, dict[str, Any]] = {
     # to keep the critic's overhead near 1.15; filter_refresh episode keeps a critic split between the
     # two routes from switching routes mid-episode. On FourRoom the same three settings cost the critic
     # its single-route G* and the corner result, so FourRoom keeps the family's defaults.
-    "keydoor": {"steps": 40_000, "low": {"shaping": 1.0},
-                "loop": {"critic_every": 8, "filter_refresh": "episode"}},
-    "keydoor_incorrect": {"steps": 40_000, "low": {"shaping": 1.0},
-                          "loop": {"critic_every": 8, "filter_refresh": "episode"}},
+    "keydoor": _KEYDOOR,
+    "keydoor_incorrect": _KEYDOOR,            # preset() deep-copies, so sharing the dict is safe
     "stack_cubes": {"steps": 20_000, "env": {"horizon": 400}, "loop": {"option_steps": 40}},
     "push_any_one": {"steps": 8_000, "env": {"horizon": 200}},
     "collect_three_balls": {"steps": 12_000, "env": {"horizon": 600}},
