@@ -107,6 +107,8 @@ class InferenceSpec(StrictModel):
     baseline_beta: float = Field(0.9, ge=0, lt=1, description="decaying-average baseline factor")
     init_scale: float = Field(1.0, description="initial coupling = init_scale * edge sign")
     exact_max_n: int = Field(16, ge=0, le=20, description="exact log Z up to this N")
+    pyro_validation: Literal["first", "always", "never"] = Field(
+        "first", description="Pyro validation on the first update only, on every update, or never")
 
 
 class ModelSpec(StrictModel):

@@ -234,3 +234,24 @@ def test_large_n_trains_with_leave_one_out_score():
         d = critic.update(residuals)
     assert d["entropy_is_exact"] == 0.0
     assert critic.marginals()[0] > 0.9
+
+
+@pytest.mark.parametrize("mode, expected", [("first", [True, False, False]), ("always", [True] * 3),
+                                            ("never", [False] * 3)])
+def test_pyro_validation_modes_change_checks_not_results(mode, expected):
+    from pyro.infer.util import is_validation_enabled
+
+    seen = []
+
+    def residuals(w):
+        seen.append(is_validation_enabled())
+        return keydoor_residuals(w)
+
+    a = SubgoalCritic(KEYDOOR, config=InferenceConfig(pyro_validation=mode), seed=4)
+    b = SubgoalCritic(KEYDOOR, config=InferenceConfig(pyro_validation="always"), seed=4)
+    for _ in range(3):
+        assert a.update(residuals) == b.update(keydoor_residuals)
+    assert seen == expected
+    assert torch.equal(a.last_samples(), b.last_samples())
+    with pytest.raises(ValueError, match="pyro_validation"):
+        InferenceConfig(pyro_validation="sometimes")
