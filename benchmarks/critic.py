@@ -36,8 +36,8 @@ def td_batch(n: int, b: int = 32) -> TDBatch:
     return TDBatch(q[:, 0], q, torch.rand(b, generator=g), torch.full((b,), 0.9))
 
 
-def time_updates(n: int, repeats: int) -> float:
-    critic = SubgoalCritic(sparse_graph(n), config=InferenceConfig(), seed=0)
+def time_updates(n: int, repeats: int, pyro_validation: str = "first") -> float:
+    critic = SubgoalCritic(sparse_graph(n), config=InferenceConfig(pyro_validation=pyro_validation), seed=0)
     batch = td_batch(n)
     for _ in range(3):
         critic.update(batch)
@@ -95,10 +95,13 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
     print(f"torch {torch.__version__}, pyro {pyro.__version__}, 1 thread")
-    print("\n| N | graph edges | ms / update (S=64, burn-in 32) |\n|---|---|---|")
+    print("\n| N | graph edges | ms / update (S=64, burn-in 32) | with Pyro validation on every update | ratio |"
+          "\n|---|---|---|---|---|")
     for n in (5, 10, 20, 64):
-        ms = 1000 * time_updates(n, args.repeats if n < 64 else max(5, args.repeats // 2))
-        print(f"| {n} | {sparse_graph(n).num_edges} | {ms:.1f} |")
+        repeats = args.repeats if n < 64 else max(5, args.repeats // 2)
+        ms = 1000 * time_updates(n, repeats)                       # default: validation on the first update
+        ms_always = 1000 * time_updates(n, repeats, "always")
+        print(f"| {n} | {sparse_graph(n).num_edges} | {ms:.1f} | {ms_always:.1f} | {ms_always / ms:.2f} |")
     batched, mcmc = sampler_rates()
     print(f"\nsampler, N=10: batched {batched:,.0f} chain-sweeps/s; pyro.infer.MCMC {mcmc:,.0f} sweeps/s ({batched / mcmc:.0f}x)")
     print(f"exact log Z + backward at N=20: {log_z_time():.3f} s")
