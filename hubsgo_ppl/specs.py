@@ -105,7 +105,9 @@ class InferenceSpec(StrictModel):
     num_samples: int = Field(64, ge=2, description="MH chains / ELBO particles per update")
     kernel: Literal["single_site", "block"] = "single_site"
     baseline_beta: float = Field(0.9, ge=0, lt=1, description="decaying-average baseline factor")
-    init_scale: float = Field(1.0, description="initial coupling = init_scale * edge sign")
+    init_scale: float = Field(1.0, description="initial coupling = init_scale * edge sign (init: edges)")
+    init: Literal["edges", "prior"] = Field(
+        "edges", description="q starts at theta 0, J = init_scale * sign ('edges') or equal to the prior")
     exact_max_n: int = Field(16, ge=0, le=20, description="exact log Z up to this N")
     pyro_validation: Literal["first", "always", "never"] = Field(
         "first", description="Pyro validation on the first update only, on every update, or never")

@@ -6,9 +6,9 @@ Model (Eq. 3-4)::
     0 ~ f(. | r(w)),  r(w) = y_G(w) - Q(s, g)   residuals of the minibatch, likelihood f (Eq. 4)
 
 Guide: the pairwise MRF q(w; lambda) of Eq. 1 whose ``theta`` (unary) and ``coupling`` (pairwise)
-are ``pyro.param`` s, initialised to 0 and ``init_scale * edge sign``. The guide's sample site draws w
-with our MH kernels from persistent chains (S chains, ``burn_in`` sweeps from their last state per
-update). ``TraceGraph_ELBO(num_particles=S, vectorize_particles=True)`` then gives the score-function
+are ``pyro.param`` s, initialised to 0 and ``init_scale * edge sign``, or to the prior itself with
+``init="prior"``. The guide's sample site draws w with our MH kernels from persistent chains (S
+chains, ``burn_in`` sweeps from their last state per update). ``TraceGraph_ELBO(num_particles=S, vectorize_particles=True)`` then gives the score-function
 gradient of Eq. 5, L(lambda) = E_q[L_G] + KL(q || p), with a decaying-average baseline; one
 :meth:`SubgoalCritic.update` is lines 9-11 of Algorithm 1.
 
@@ -54,6 +54,7 @@ __all__ = ["InferenceConfig", "TDBatch", "SubgoalCritic"]
 
 _SIGN_NAMES = {"positive": 1, "negative": -1, "unknown": 0}
 VALIDATE = ("first", "always", "never")
+INITS = ("edges", "prior")
 
 
 @dataclass
@@ -65,7 +66,10 @@ class InferenceConfig:
     num_samples: int = 64  # S: MH chains = vectorised ELBO particles per update
     kernel: str = "single_site"  # "single_site" (chromatic flip sweeps) or "block"
     baseline_beta: float = 0.9  # decay of TraceGraph_ELBO's average baseline (variance reduction)
-    init_scale: float = 1.0  # initial coupling = init_scale * human edge sign
+    init_scale: float = 1.0  # initial coupling = init_scale * human edge sign (init="edges")
+    # where q starts: "edges" (theta = 0, J = init_scale * edge sign) or "prior" (q = p(w), so KL = 0
+    # before any data; needs a prior the guide's family holds, e.g. bernoulli or ising)
+    init: str = "edges"
     exact_max_n: int = 16  # exact log Z for N <= this; leave-one-out score above
     # Pyro's validation (distribution arguments, site shapes, NaN/inf warnings) on the "first" update
     # only, on "always" or "never": it costs ~20% of an update, and a custom prior or likelihood that
@@ -90,6 +94,8 @@ class InferenceConfig:
             bad("init_scale", "must be finite")
         if int(self.exact_max_n) != self.exact_max_n or not 0 <= self.exact_max_n <= EXACT_LIMIT:
             bad("exact_max_n", f"must be an integer in 0..{EXACT_LIMIT}")
+        if self.init not in INITS:
+            bad("init", f"use one of: {', '.join(INITS)}")
         if self.pyro_validation not in VALIDATE:
             bad("pyro_validation", f"use one of: {', '.join(VALIDATE)}")
         self.burn_in, self.num_samples, self.exact_max_n = int(self.burn_in), int(self.num_samples), int(self.exact_max_n)
@@ -216,8 +222,16 @@ class SubgoalCritic:
         self._edge_index = graph.edge_index
         self._prior_dist = self.prior.distribution()
         self._generator = torch.Generator().manual_seed(self.seed)
-        self._theta = torch.zeros(self.n, requires_grad=True)
-        self._coupling = (cfg.init_scale * graph.edge_sign).clone().requires_grad_(True)
+        theta, coupling = torch.zeros(self.n), cfg.init_scale * graph.edge_sign
+        if cfg.init == "prior":
+            natural = self.prior.natural_params()
+            if natural is None:
+                raise ValueError(
+                    f"inference.init = 'prior' needs a prior that the guide (a pairwise MRF on this graph) can "
+                    f"represent, such as bernoulli or ising; {prior!r} is not one. Use init: edges")
+            theta, coupling = natural
+        self._theta = theta.detach().clone().float().requires_grad_(True)
+        self._coupling = coupling.detach().clone().float().requires_grad_(True)
         self._param_state = {
             "params": {"theta": self._theta, "coupling": self._coupling},
             "constraints": {"theta": constraints.real, "coupling": constraints.real},

@@ -58,6 +58,11 @@ class Prior:
     def params(self) -> dict[str, float]:
         return {}
 
+    def natural_params(self) -> tuple[torch.Tensor, torch.Tensor] | None:
+        """(theta (N,), coupling (E,)) on ``graph.edge_index`` when this prior is a pairwise MRF on the
+        graph (so the guide can start equal to it, ``inference.init: prior``); None otherwise."""
+        return None
+
 
 @register_prior("bernoulli")
 class BernoulliPrior(Prior):
@@ -72,6 +77,10 @@ class BernoulliPrior(Prior):
 
     def params(self):
         return {"p": self.p}
+
+    def natural_params(self):
+        theta = torch.full((self.graph.n,), math.log(self.p) - math.log1p(-self.p))
+        return theta, torch.zeros(self.graph.num_edges)
 
     def distribution(self):
         return BernoulliSet(self.p, self.graph.n)
@@ -182,6 +191,9 @@ class IsingPrior(Prior):
 
     def params(self):
         return {"strength": self.strength, "field": self.field}
+
+    def natural_params(self):
+        return torch.full((self.graph.n,), self.field), self.strength * self.graph.edge_sign
 
     def distribution(self):
         return PairwiseMRF(

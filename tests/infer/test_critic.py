@@ -255,3 +255,23 @@ def test_pyro_validation_modes_change_checks_not_results(mode, expected):
     assert torch.equal(a.last_samples(), b.last_samples())
     with pytest.raises(ValueError, match="pyro_validation"):
         InferenceConfig(pyro_validation="sometimes")
+
+
+@pytest.mark.parametrize("graph", ["specific", "fully_connected", "independent"])
+@pytest.mark.parametrize("prior, params", [("ising", {"strength": 3.0, "field": -2.0}), ("bernoulli", {"p": 0.3})])
+def test_init_prior_starts_q_at_the_prior(graph, prior, params):
+    g = KEYDOOR.preset(graph)
+    critic = SubgoalCritic(g, prior=prior, prior_params=params, config=InferenceConfig(init="prior"), seed=0)
+    s = state_table(g.n)
+    log_q = critic.distribution().log_prob(s)
+    log_p = get_prior(prior, g, **params).distribution().log_prob(s)
+    assert torch.allclose(log_q, log_p, atol=1e-5)          # KL(q || p) = 0 before any data
+    edges = SubgoalCritic(g, prior=prior, prior_params=params, seed=0)   # default: theta 0, J = sign
+    assert not torch.allclose(edges.distribution().log_prob(s), log_p, atol=1e-2)
+
+
+def test_init_prior_refuses_a_prior_the_guide_cannot_hold():
+    with pytest.raises(ValueError, match="init = 'prior'.*beta_bernoulli.*init: edges"):
+        SubgoalCritic(KEYDOOR, prior="beta_bernoulli", config=InferenceConfig(init="prior"))
+    with pytest.raises(ValueError, match="InferenceConfig.init"):
+        InferenceConfig(init="zeros")
