@@ -22,13 +22,15 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("task")
     p.add_argument("--agent", default="hubsgo", choices=["hubsgo", "hdqn"])
+    p.add_argument("--model", default=None, help="critic spec name or path (default: TASK-specific)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--steps", type=int, default=None, help="stop after this many env steps (default: budget)")
     p.add_argument("--first", type=int, default=12, help="chosen sub-goals shown per episode")
     p.add_argument("--set", action="append", default=[], help="hyperparameter override")
     args = p.parse_args()
     torch.set_num_threads(1)
-    resolved = resolve(RunConfig(task=args.task, agent=args.agent, seed=args.seed, overrides=args.set))
+    resolved = resolve(RunConfig(task=args.task, agent=args.agent, model=args.model, seed=args.seed,
+                                  overrides=args.set))
     _, loop = _build(resolved)
     stop = args.steps or int(resolved["hyper"]["steps"])
     initials = {n: "".join(w[0] for w in n.split("_")) for n in loop.names}
