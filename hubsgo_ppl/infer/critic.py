@@ -8,8 +8,9 @@ Model (Eq. 3-4)::
 Guide: the pairwise MRF q(w; lambda) of Eq. 1 whose ``theta`` (unary) and ``coupling`` (pairwise)
 are ``pyro.param`` s, initialised to 0 and ``init_scale * edge sign``, or to the prior itself with
 ``init="prior"``. The guide's sample site draws w with our MH kernels from persistent chains (S
-chains, ``burn_in`` sweeps from their last state per update). ``TraceGraph_ELBO(num_particles=S, vectorize_particles=True)`` then gives the score-function
-gradient of Eq. 5, L(lambda) = E_q[L_G] + KL(q || p), with a decaying-average baseline; one
+chains, ``burn_in`` sweeps from their last state per update).
+``TraceGraph_ELBO(num_particles=S, vectorize_particles=True)`` then gives the score-function gradient
+of Eq. 5, L(lambda) = E_q[L_G] + KL(q || p), with a decaying-average baseline; one
 :meth:`SubgoalCritic.update` is lines 9-11 of Algorithm 1.
 
 The parameters live in the critic's own Pyro param-store state (entered with

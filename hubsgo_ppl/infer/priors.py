@@ -196,9 +196,10 @@ class IsingPrior(Prior):
         return torch.full((self.graph.n,), self.field), self.strength * self.graph.edge_sign
 
     def distribution(self):
+        theta, coupling = self.natural_params()
         return PairwiseMRF(
-            torch.full((self.graph.n,), self.field),
-            self.strength * self.graph.edge_sign,
+            theta,
+            coupling,
             self.graph.edge_index,
             exact_max_n=EXACT_LIMIT,
         )
