@@ -1,7 +1,8 @@
 """Sub-goal filters: what distinguishes HUBS-GO from h-DQN in the one HRL loop.
 
 - :class:`CriticFilter` (HUBS-GO): Ĝt is the most probable configuration among the critic's current MH
-  samples (Sec. 3.4), and each high-level minibatch drives one critic update (Algorithm 1, lines 9-11).
+  samples (Sec. 3.4), optionally among those agreeing with the sub-goals already achieved, and each
+  high-level minibatch drives one critic update (Algorithm 1, lines 9-11).
 - :class:`NoFilter` (h-DQN): the high level always chooses from G0.
 """
 
@@ -21,8 +22,11 @@ __all__ = ["SubgoalFilter", "CriticFilter", "NoFilter"]
 class SubgoalFilter(Protocol):
     name: str
 
-    def allowed(self) -> np.ndarray | None:
-        """Ĝt as a bool mask over G0, or None when this agent does not filter."""
+    def allowed(self, achieved: np.ndarray | None = None) -> np.ndarray | None:
+        """Ĝt as a bool mask over G0, or None when this agent does not filter.
+
+        ``achieved`` ((N,) or (B, N) bool), when given, is the evidence of the sub-goals the agent has
+        already achieved; the result then has its shape."""
 
     def update(self, batch: HighLevelBatch) -> dict[str, float]:
         """Learn from one high-level minibatch; returns scalars to log."""
@@ -37,7 +41,7 @@ class NoFilter:
 
     name = "none"
 
-    def allowed(self) -> None:
+    def allowed(self, achieved: np.ndarray | None = None) -> None:
         return None
 
     def update(self, batch: HighLevelBatch) -> dict[str, float]:
@@ -60,8 +64,14 @@ class CriticFilter:
         self.critic = critic
         self._mask: np.ndarray | None = None   # None until the first update: Ĝt = G0
 
-    def allowed(self) -> np.ndarray | None:
-        return self._mask
+    def allowed(self, achieved: np.ndarray | None = None) -> np.ndarray | None:
+        """The mode of the last update's samples; given ``achieved``, the mode of those samples that
+        include every achieved sub-goal (``SubgoalCritic.filtered_set``), so that a route the agent
+        has committed to (it holds the blue key) is the one Ĝt names."""
+        if self._mask is None or achieved is None:
+            return self._mask
+        given = torch.as_tensor(np.asarray(achieved, dtype=bool))
+        return self.critic.filtered_set(given=given).cpu().numpy().astype(bool)
 
     def update(self, batch: HighLevelBatch) -> dict[str, float]:
         diag = self.critic.update(batch.residuals)

@@ -8,7 +8,7 @@ The same minibatch, as a :class:`~hubsgo_ppl.infer.critic.TDBatch`, feeds the cr
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 import torch
@@ -84,13 +84,19 @@ class HighLevelDQN:
     def ready(self) -> bool:
         return len(self.buffer) >= max(self.cfg.learning_starts, self.cfg.batch_size)
 
-    def update(self, target_mask: torch.Tensor | None) -> tuple[dict[str, float], HighLevelBatch]:
-        """One TD step with targets over ``available ∩ target_mask`` (Eq. 2); returns stats and the batch."""
+    def update(self, target_mask: torch.Tensor | Callable[[torch.Tensor], Any] | None
+               ) -> tuple[dict[str, float], HighLevelBatch]:
+        """One TD step with targets over ``available ∩ target_mask`` (Eq. 2); returns stats and the batch.
+
+        ``target_mask`` is None (G0), a bool mask (N,) or (B, N), or a callable that maps the minibatch's
+        achieved sub-goals at s' (B, N) to such a mask (Ĝt given what each s' has achieved)."""
         b = self.buffer.sample(self.cfg.batch_size)
         avail = b["available"].bool()
+        if callable(target_mask):
+            target_mask = target_mask(~avail)
         with torch.no_grad():
             q_next_t = self.q_target(b["next_obs"])
-            mask = avail if target_mask is None else avail & target_mask.bool()
+            mask = avail if target_mask is None else avail & torch.as_tensor(target_mask).bool()
             mask = torch.where(mask.any(-1, keepdim=True), mask, avail)   # empty Ĝt ∩ avail: fall back to G0
             if self.cfg.double_q:
                 q_next_online = self.q(b["next_obs"])

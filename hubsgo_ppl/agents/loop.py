@@ -59,6 +59,19 @@ class LoopConfig:
     schedule_from: str = "start"
     critic_every: int = 1                       # high-level updates pooled into one critic update
     filter_refresh: str = "option"              # when the loop reads Ĝt: every "option" or once per "episode"
+    # Ĝt given the evidence: the mode of the critic's samples among those that include every sub-goal
+    # achieved at the time (CriticFilter.allowed), both for choosing (re-read whenever the achieved set
+    # changes) and for each TD target's s'. Holding the blue key, Ĝt is then the blue route, not a
+    # yellow route the agent can no longer take (there is no drop action). False (the default, and
+    # the arm tasks'): the paper's unconditional mode. The maze preset turns it on.
+    filter_given_achieved: bool = False
+    # While training, a low-level step in a state where the greedy low level already acted under the
+    # same sub-goal in this episode is taken at random: back there, the greedy policy would repeat a
+    # path that did not reach the sub-goal, and in a deterministic env a greedy cycle never ends by
+    # itself (docs/results.md, session 4: all of KeyDoor's late timeouts). States reached after a
+    # random step are not marked, so one ε-step does not start a random walk. Discrete action spaces
+    # with a learned low level only; greedy evaluation is unaffected.
+    low_break_cycles: bool = True
 
     def __post_init__(self):
         if self.filter_refresh not in ("option", "episode"):
@@ -116,6 +129,9 @@ class HRLLoop:
         self.success_rate = np.zeros(len(self.names))   # per-goal moving average of option success
         self._pending: list = []                # high-level minibatches waiting for the next critic update
         self._ghat: np.ndarray | None = None    # Ĝt as the loop sees it (refreshed per option or per episode)
+        self._ghat_given: np.ndarray | None = None   # the achieved set Ĝt was last read with
+        self._break_cycles = (config.low_break_cycles and getattr(low, "learns", False)
+                              and isinstance(env.action_space, gym.spaces.Discrete))
 
     # -- one episode ---------------------------------------------------------------------------------
     def progress(self) -> float:
@@ -131,10 +147,24 @@ class HRLLoop:
         left = max(self.cfg.total_steps - self.first_reward_step, 1)
         return (self.env_steps - self.first_reward_step) / left
 
+    def _read_filter(self, achieved: np.ndarray) -> None:
+        given = self.cfg.filter_given_achieved
+        self._ghat = self.filter.allowed(achieved if given else None)
+        self._ghat_given = achieved.copy()
+
+    def _target_mask(self, achieved_next: torch.Tensor) -> Any:
+        """Ĝt for each TD target's s' (the high level's minibatch), given what s' has achieved."""
+        if self.cfg.filter_given_achieved:
+            mask = self.filter.allowed(achieved_next.numpy())
+        else:
+            mask = self.filter.allowed()
+        return None if mask is None else torch.as_tensor(mask)
+
     def _allowed(self, achieved: np.ndarray, filter_eps: float) -> np.ndarray:
         base = ~achieved if (~achieved).any() else np.ones_like(achieved)
-        if self.cfg.filter_refresh == "option":
-            self._ghat = self.filter.allowed()
+        if (self.cfg.filter_refresh == "option" or self._ghat_given is None
+                or (self.cfg.filter_given_achieved and not np.array_equal(achieved, self._ghat_given))):
+            self._read_filter(achieved)
         ghat = self._ghat
         if ghat is not None and self.rng.random() < filter_eps:
             restricted = base & ghat
@@ -158,7 +188,9 @@ class HRLLoop:
                 sums[k] = sums.get(k, 0.0) + v
                 counts[k] = counts.get(k, 0) + 1
 
-        self._ghat = self.filter.allowed()          # with filter_refresh="episode", Ĝt holds all episode
+        self._read_filter(achieved)     # with filter_refresh="episode", Ĝt holds until the achieved set changes
+        greedy_at: set[tuple[int, bytes]] = set()   # (sub-goal, state) where the low level acted greedily
+        revisits = 0
         explore, low_explore, filter_eps = 0.0, 0.0, cfg.eval_filter     # greedy evaluation
         done = False
         while not done:
@@ -176,7 +208,14 @@ class HRLLoop:
             if train and cfg.low_explore_adaptive:
                 goal_explore = max(low_explore, min(cfg.low_explore_cap, 1.0 - float(self.success_rate[g])))
             while k < cfg.option_steps:
-                action = self.low.act(obs, g, goal_explore, env)
+                step_explore, key = goal_explore, None
+                if train and self._break_cycles:
+                    key = (g, np.asarray(obs).tobytes())
+                    if key in greedy_at:
+                        step_explore, revisits = 1.0, revisits + 1
+                action = self.low.act(obs, g, step_explore, env)
+                if key is not None and not getattr(self.low, "explored", True):
+                    greedy_at.add(key)
                 next_obs, reward, terminated, truncated, info = env.step(action)
                 next_achieved = np.asarray(info["subgoals"], dtype=bool)
                 if train and self.low.learns:
@@ -203,9 +242,7 @@ class HRLLoop:
                 discount = 0.0 if terminated else cfg.gamma ** k
                 self.high.store(s0, g, R, obs, discount, available)
                 if self.high.ready():
-                    ghat = self.filter.allowed()
-                    target = None if ghat is None else torch.as_tensor(ghat)
-                    stats, batch = self.high.update(target)
+                    stats, batch = self.high.update(self._target_mask)
                     record(stats)
                     self._pending.append(batch)
                     if len(self._pending) >= cfg.critic_every:
@@ -213,6 +250,8 @@ class HRLLoop:
                         record(self.filter.update(pooled))
         if train:
             self.episodes += 1
+            if self._break_cycles:
+                sums["low/revisits"], counts["low/revisits"] = float(revisits), 1
         return EpisodeStats(episode=ep, env_steps=self.env_steps, ret=ret, length=length, success=success,
                             options=options, explore_eps=explore, filter_eps=filter_eps, chosen=chosen,
                             scalars={k: sums[k] / counts[k] for k in sums})

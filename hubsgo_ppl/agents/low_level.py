@@ -68,12 +68,15 @@ class GoalDQN:
                                    obs=(obs_dim,), action=(), next_obs=(obs_dim,), before=(n_goals,),
                                    after=(n_goals,), terminated=())
         self.steps = 0
+        self.explored = False               # whether the last act() took a random action
 
     def _q(self, net: nn.Module, obs: torch.Tensor) -> torch.Tensor:
         return net(obs).view(*obs.shape[:-1], self.n_goals, self.n_actions)
 
     def act(self, obs: np.ndarray, goal: int, explore_eps: float, env: gym.Env | None = None) -> int:
-        if self.rng.random() < explore_eps:
+        """ε-greedy in Q(obs, goal, ·); ``self.explored`` says whether this action was the random one."""
+        self.explored = bool(self.rng.random() < explore_eps)
+        if self.explored:
             return int(self.rng.integers(self.n_actions))
         with torch.no_grad():
             q = self._q(self.q, torch.as_tensor(obs, dtype=torch.float32))[goal]

@@ -12,8 +12,9 @@ PRESETS: dict[str, dict[str, Any]] = {
         "steps": 15_000,                # FourRoom's measured budget; KeyDoor's is in TASK_PRESETS
         "low_level": "learned",
         "env": {},                      # keyword arguments of the env, e.g. max_steps
+        # filter_given_achieved: Ĝt given what the agent holds and has opened (docs/results.md, session 5)
         "loop": {"option_steps": 10, "explore_fraction": 0.3, "low_explore_fraction": 0.3,
-                 "filter_fraction": 0.5},
+                 "filter_fraction": 0.5, "filter_given_achieved": True},
         "high": {"hidden": [128, 128], "lr": 1e-3, "batch_size": 64},
         "low": {"hidden": [128, 128], "lr": 5e-4, "batch_size": 128, "learning_starts": 1000},
         # flat baselines (Stable-Baselines3 keyword arguments; agents/flat.py). dqn and ddqn share "dqn".

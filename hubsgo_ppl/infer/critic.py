@@ -387,15 +387,28 @@ class SubgoalCritic:
             raise RuntimeError("no update has run yet; call update() first")
         return self._last_samples.clone()
 
-    def filtered_set(self) -> torch.Tensor:
+    def filtered_set(self, given: torch.Tensor | None = None) -> torch.Tensor:
         """Sec. 3.4: the most frequent configuration among the last update's samples, BoolTensor (N,).
 
-        Before the first update this is the current chain states' most frequent configuration.
-        Ties go to the lexicographically smallest configuration.
+        ``given`` (bool, (N,) or (B, N)) conditions on sub-goals already achieved: the most frequent
+        configuration among the samples with ``w_i = 1`` for every given ``i``, i.e. the mode of the
+        samples from q(w | w_given = 1). Where no sample agrees with a row, that row gets the
+        unconditional mode. The result has ``given``'s shape. Before the first update the samples are
+        the current chain states. Ties go to the lexicographically smallest configuration.
         """
         samples = self._last_samples if self._last_samples is not None else self._chains
         configs, counts = torch.unique(samples, dim=0, return_counts=True)
-        return configs[int(counts.argmax())].bool()
+        mode = int(counts.argmax())
+        if given is None:
+            return configs[mode].bool()
+        given = torch.as_tensor(given, dtype=torch.bool)
+        if given.shape[-1] != self.n or given.dim() not in (1, 2):
+            raise ValueError(f"given must have shape ({self.n},) or (B, {self.n}), got {tuple(given.shape)}")
+        rows = given.reshape(-1, self.n)
+        agree = (configs.bool()[None] | ~rows[:, None]).all(-1)                 # (B, U)
+        best = torch.where(agree, counts[None], torch.zeros_like(counts)[None]).argmax(-1)
+        best = torch.where(agree.any(-1), best, torch.full_like(best, mode))
+        return configs[best].bool().reshape(given.shape)
 
     def distribution(self, exact_max_n: int | None = None) -> PairwiseMRF:
         """The current q(w; lambda) as a detached :class:`PairwiseMRF`."""

@@ -23,7 +23,7 @@ class FixedSetFilter:
         self.rows = 0          # transitions seen over all updates
         self.weights = []
 
-    def allowed(self):
+    def allowed(self, achieved=None):
         return self.mask
 
     def update(self, batch):
@@ -93,12 +93,12 @@ def test_filter_is_updated_once_per_high_level_update_or_every_k():
 
 def test_filter_refresh_per_episode_holds_ghat_for_the_whole_episode():
     class Flipping(FixedSetFilter):
-        def allowed(self):                       # a new Ĝt after every read
+        def allowed(self, achieved=None):        # a new Ĝt after every read
             self.reads = getattr(self, "reads", 0) + 1
             return np.roll(self.mask, self.reads)
 
     for refresh, max_sets in (("episode", 1), ("option", None)):
-        loop = _loop(extra=[f"loop.filter_refresh={refresh}"])
+        loop = _loop(extra=[f"loop.filter_refresh={refresh}", "loop.filter_given_achieved=false"])
         loop.filter = Flipping([True, False, False, False, False])
         loop._filter = lambda progress: 1.0
         loop.high.select = lambda obs, allowed, eps: int(np.flatnonzero(allowed)[0])
@@ -110,6 +110,74 @@ def test_filter_refresh_per_episode_holds_ghat_for_the_whole_episode():
             assert len(set(stats.chosen)) > 1
     with pytest.raises(ValueError, match="filter_refresh"):
         _loop(extra=["loop.filter_refresh=sometimes"])
+
+
+def test_ghat_is_read_given_the_achieved_subgoals_when_they_change():
+    class Recording(FixedSetFilter):
+        """Ĝt = the fixed mask plus whatever was achieved (so the answer shows what it was given)."""
+
+        def allowed(self, achieved=None):
+            self.given = getattr(self, "given", []) + [None if achieved is None else np.array(achieved)]
+            return self.mask if achieved is None else self.mask | np.asarray(achieved, dtype=bool)
+
+    none = np.zeros(5, bool)
+    holds_blue_key = np.array([False, False, True, False, False])
+    for given in (True, False):
+        loop = _loop(extra=["loop.filter_refresh=episode", f"loop.filter_given_achieved={str(given).lower()}"])
+        loop.filter = filt = Recording([True, True, False, False, True])
+        loop._read_filter(none)                               # what run_episode does first
+        loop._allowed(none, filter_eps=1.0)
+        assert len(filt.given) == 1                           # same achieved set: Ĝt is held
+        loop._allowed(holds_blue_key, filter_eps=1.0)
+        if given:
+            assert len(filt.given) == 2 and filt.given[-1].tolist() == holds_blue_key.tolist()
+        else:
+            assert len(filt.given) == 1 and filt.given[0] is None
+        # the TD targets: one Ĝt per row of the minibatch, given what each s' has achieved
+        rows = torch.tensor([none.tolist(), holds_blue_key.tolist()])
+        mask = loop._target_mask(rows)
+        if given:
+            assert mask.tolist() == [[True, True, False, False, True], [True, True, True, False, True]]
+        else:
+            assert mask.tolist() == [True, True, False, False, True]
+        loop.filter = NoFilterLike = FixedSetFilter(None)      # h-DQN: no Ĝt, targets over G0
+        NoFilterLike.allowed = lambda achieved=None: None
+        assert loop._target_mask(rows) is None
+
+
+def test_low_level_steps_at_random_where_it_already_acted_greedily_under_the_same_goal():
+    """A greedy low level stuck on a no-op (pickup facing nothing) is pushed out of it while training;
+    a state first reached by a random step is not marked."""
+    for breaks in (True, False):
+        loop = _loop(extra=[f"loop.low_break_cycles={str(breaks).lower()}"])
+        loop._low_explore = lambda progress: 0.0
+        loop.high.select = lambda obs, allowed, eps: 4                     # always the goal
+        greedy, calls = set(), []
+        pickup = loop.env.unwrapped.action_names.index("pickup")
+
+        def act(obs, goal, eps, env, greedy=greedy, calls=calls, low=loop.low):
+            key = (goal, np.asarray(obs).tobytes())
+            calls.append((key in greedy, eps))
+            low.explored = eps >= 1.0
+            if low.explored:
+                return int(low.rng.integers(low.n_actions))
+            greedy.add(key)
+            return pickup
+
+        loop.low.act = act
+        stats = loop.run_episode(train=True)
+        repeats = sum(r for r, _ in calls)
+        assert repeats > 0
+        if breaks:
+            assert all((eps == 1.0) == repeat for repeat, eps in calls)
+            assert stats.scalars["low/revisits"] == repeats
+            assert sum(eps == 0.0 for _, eps in calls) == len(greedy)     # each state acted on greedily once
+        else:
+            assert {eps for _, eps in calls} == {0.0} and "low/revisits" not in stats.scalars
+        calls.clear()
+        greedy.clear()
+        loop.run_episode(train=False)                                     # greedy evaluation: never
+        assert {eps for _, eps in calls} == {0.0}
 
 
 def test_options_end_on_achievement_and_chosen_subgoals_come_from_the_allowed_set():

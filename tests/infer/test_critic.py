@@ -153,6 +153,28 @@ def test_learning_keydoor_specific_graph():
     assert critic.filtered_set().tolist() in [[True, True, False, False], [False, False, True, True]]
 
 
+def test_filtered_set_given_achieved_subgoals_is_the_mode_of_the_agreeing_samples():
+    critic = SubgoalCritic(KEYDOOR.preset("specific"), seed=0)
+    samples = [[1, 1, 0, 0]] * 6 + [[0, 0, 1, 1]] * 3 + [[0, 1, 1, 1]] * 2 + [[1, 0, 0, 0]]
+    state = critic.state_dict()
+    state["last_samples"] = torch.tensor(samples, dtype=torch.float)
+    critic.load_state_dict(state)
+    assert critic.filtered_set().tolist() == [True, True, False, False]
+    cases = {  # given -> mode among the samples with w = 1 wherever given
+        (0, 0, 0, 0): [1, 1, 0, 0],
+        (1, 0, 0, 0): [1, 1, 0, 0],
+        (0, 0, 1, 0): [0, 0, 1, 1],     # 3 of {a2, b2} beat 2 of {b1, a2, b2}
+        (0, 1, 1, 0): [0, 1, 1, 1],
+        (1, 0, 1, 0): [1, 1, 0, 0],     # no sample agrees: the unconditional mode
+    }
+    given = torch.tensor(list(cases), dtype=torch.bool)
+    expected = [[bool(v) for v in row] for row in cases.values()]
+    assert critic.filtered_set(given=given).tolist() == expected                # one row per given
+    assert critic.filtered_set(given=given[2]).tolist() == expected[2]         # (N,) in, (N,) out
+    with pytest.raises(ValueError, match="shape"):
+        critic.filtered_set(given=torch.zeros(3, dtype=torch.bool))
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("preset, budget", [("fully_connected", 300), ("independent", 300)])
 def test_learning_keydoor_other_presets(preset, budget):
