@@ -242,6 +242,7 @@ class SubgoalCritic:
         self._baseline = {"use_decaying_avg_baseline": True, "baseline_beta": cfg.baseline_beta}
         self._chains = torch.randint(0, 2, (cfg.num_samples, self.n), generator=self._generator).float()
         self._last_samples: torch.Tensor | None = None
+        self._unique: tuple | None = None       # (samples, configs, counts) for filtered_set's reads
         self._guide_dist: PairwiseMRF | None = None
         self.num_updates = 0
 
@@ -397,7 +398,9 @@ class SubgoalCritic:
         the current chain states. Ties go to the lexicographically smallest configuration.
         """
         samples = self._last_samples if self._last_samples is not None else self._chains
-        configs, counts = torch.unique(samples, dim=0, return_counts=True)
+        if self._unique is None or self._unique[0] is not samples:     # new samples replace the tensor
+            self._unique = (samples, *torch.unique(samples, dim=0, return_counts=True))
+        _, configs, counts = self._unique
         mode = int(counts.argmax())
         if given is None:
             return configs[mode].bool()
