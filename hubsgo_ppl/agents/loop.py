@@ -2,8 +2,9 @@
 
 Each high-level iteration:
 
-1. the filter offers Ĝt; with probability ε_filter (rising over training, Sec. 3.4) the high level
-   chooses from Ĝt, otherwise from G0 — in both cases only among sub-goals not yet achieved;
+1. the filter offers Ĝt (with ``filter_given_achieved``, given the sub-goals achieved so far); with
+   probability ε_filter (rising over training, Sec. 3.4) the high level chooses from Ĝt, otherwise
+   from G0 — in both cases only among sub-goals not yet achieved;
 2. the high level picks g = argmax Q(s, g') over that set (ε-greedy while training);
 3. the low level acts until g is achieved, the env ends, or ``option_steps`` pass (lines 3-8);
 4. the transition (s, g, R, s', γ^k) goes to the high-level replay; the high level takes a TD step with
