@@ -1,11 +1,17 @@
 """Critic benchmark (not a test): update time, sampler throughput, exact log Z, learning budgets.
 
 Run: ``.venv/bin/python benchmarks/critic.py`` (one CPU thread; results go to docs/benchmarks.md).
+
+``--floor`` also times, side by side in one run on a maze spec, one critic update against its two
+parts that our code cannot make cheaper: a bare ``TraceGraph_ELBO`` step with the same residuals,
+particles and baseline but an independent Bernoulli guide (Pyro's own cost per step), and the MH
+burn-in sweeps alone.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import statistics
 import time
 
@@ -88,12 +94,74 @@ def keydoor_budget(preset: str, max_updates: int = 600, seed: int = 0) -> int | 
     return None
 
 
+def pyro_floor(spec: str = "fourroom-specific", rounds: int = 5, repeats: int = 40) -> dict[str, float]:
+    """Best-of-``rounds`` ms per call of: a critic update on ``spec``, a bare TraceGraph_ELBO step with an
+    independent Bernoulli guide on the same residuals (no MH), and the update's MH burn-in alone."""
+    import pyro.distributions as dist
+    from pyro.infer import TraceGraph_ELBO
+
+    from hubsgo_ppl.infer.mh import single_site_sweep
+    from hubsgo_ppl.specs import load_model_spec
+
+    critic = SubgoalCritic.from_spec(load_model_spec(spec), seed=0)
+    n, cfg = critic.n, critic.config
+    g = torch.Generator().manual_seed(1)
+    batch = TDBatch(torch.rand(64, generator=g), torch.rand(64, n, generator=g), torch.zeros(64),
+                    torch.full((64,), 0.9), available=torch.rand(64, n, generator=g) > 0.2)
+    theta = torch.zeros(n, requires_grad=True)
+
+    def model():
+        w = pyro.sample("w", dist.Bernoulli(torch.full((n,), 0.5)).to_event(1))
+        r = batch.residuals(w)
+        pyro.sample("td", critic.likelihood.distribution(r).to_event(1), obs=torch.zeros(r.shape))
+
+    def guide():
+        pyro.sample("w", dist.Bernoulli(logits=pyro.param("theta", theta)).to_event(1),
+                    infer={"baseline": {"use_decaying_avg_baseline": True, "baseline_beta": cfg.baseline_beta}})
+
+    elbo = TraceGraph_ELBO(num_particles=cfg.num_samples, vectorize_particles=True, max_plate_nesting=0)
+    store = {"params": {}, "constraints": {}}
+
+    def bare_step():
+        with pyro.get_param_store().scope(state=store), pyro.validation_enabled(False):
+            elbo.loss_and_grads(model, guide)
+
+    chains = critic._chains.clone()
+    calls = {
+        "critic.update": lambda: critic.update(batch),
+        "bare TraceGraph_ELBO step": bare_step,
+        f"{cfg.burn_in} MH sweeps": lambda: single_site_sweep(chains, critic._theta.detach(), critic._coupling.detach(),
+                                                            critic.graph.edge_index, g, sweeps=cfg.burn_in),
+    }
+    for call in calls.values():
+        for _ in range(5):
+            call()
+    best = {name: math.inf for name in calls}
+    for _ in range(rounds):                       # interleaved, so machine load hits all three alike
+        for name, call in calls.items():
+            t = time.perf_counter()
+            for _ in range(repeats):
+                call()
+            best[name] = min(best[name], 1000 * (time.perf_counter() - t) / repeats)
+    return best
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--repeats", type=int, default=20)
     parser.add_argument("--seeds", type=int, default=3, help="seeds for the learning-budget runs")
+    parser.add_argument("--floor", default=None, metavar="SPEC",
+                        help="only time an update on this spec against a bare TraceGraph_ELBO step and the MH sweeps")
     args = parser.parse_args()
     torch.set_num_threads(1)
+    if args.floor:
+        best = pyro_floor(args.floor)
+        update = best["critic.update"]
+        print(f"torch {torch.__version__}, pyro {pyro.__version__}, 1 thread, spec {args.floor}, B = 64")
+        print("\n| call | ms (best of 5 x 40) | share of an update |\n|---|---|---|")
+        for name, ms in best.items():
+            print(f"| {name} | {ms:.2f} | {ms / update:.2f} |")
+        return
     print(f"torch {torch.__version__}, pyro {pyro.__version__}, 1 thread")
     print("\n| N | graph edges | ms / update (S=64, burn-in 32) | with Pyro validation on every update | ratio |"
           "\n|---|---|---|---|---|")
