@@ -74,7 +74,10 @@ class CriticFilter:
         return self.critic.filtered_set(given=given).cpu().numpy().astype(bool)
 
     def update(self, batch: HighLevelBatch) -> dict[str, float]:
-        diag = self.critic.update(batch.residuals)
+        """One critic update on the minibatch. The TDBatch itself goes to the critic, not its
+        ``residuals`` method, so that its ``weight`` scales the likelihood: a pool of K minibatches counts
+        as their mean or their sum (``loop.critic_pool_weight``)."""
+        diag = self.critic.update(batch)
         loss = diag.get("loss", float("nan"))
         if not math.isfinite(loss):
             raise FloatingPointError(

@@ -9,7 +9,8 @@ Each high-level iteration:
 3. the low level acts until g is achieved, the env ends, or ``option_steps`` pass (lines 3-8);
 4. the transition (s, g, R, s', γ^k) goes to the high-level replay; the high level takes a TD step with
    targets over Ĝt (Eq. 2), and the same minibatch drives the filter's update (lines 9-11), pooled
-   with the previous ones every ``critic_every`` minibatches (``TDBatch.cat``, weight 1/K).
+   with the previous ones every ``critic_every`` minibatches (``TDBatch.cat``; the pool's likelihood
+   counts as the minibatches' mean, weight 1/K, or with ``critic_pool_weight="sum"`` their sum).
 
 The loop is the only place where an environment and the critic meet. It does no IO: it returns
 per-episode statistics and leaves logging, progress bars and checkpoints to ``experiments.run``.
@@ -17,6 +18,7 @@ per-episode statistics and leaves logging, progress bars and checkpoints to ``ex
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
@@ -59,6 +61,9 @@ class LoopConfig:
     # and decaying exploration only makes a late first success less likely)
     schedule_from: str = "start"
     critic_every: int = 1                       # high-level updates pooled into one critic update
+    # how a pool of K minibatches weighs in the likelihood (Eq. 4): "mean" (weight 1/K: an update aims
+    # at the posterior of one minibatch) or "sum" (weight 1: of all K x B transitions). Equal for K = 1
+    critic_pool_weight: str = "mean"
     filter_refresh: str = "option"              # when the loop reads Ĝt: every "option" or once per "episode"
     # Ĝt given the evidence: the mode of the critic's samples among those that include every sub-goal
     # achieved at the time (CriticFilter.allowed), both for choosing (re-read whenever the achieved set
@@ -79,6 +84,8 @@ class LoopConfig:
             raise ValueError(f"loop.filter_refresh must be 'option' or 'episode', got {self.filter_refresh!r}")
         if self.schedule_from not in ("start", "first_reward"):
             raise ValueError(f"loop.schedule_from must be 'start' or 'first_reward', got {self.schedule_from!r}")
+        if self.critic_pool_weight not in ("mean", "sum"):
+            raise ValueError(f"loop.critic_pool_weight must be 'mean' or 'sum', got {self.critic_pool_weight!r}")
         if int(self.critic_every) < 1:
             raise ValueError(f"loop.critic_every must be a positive integer, got {self.critic_every!r}")
 
@@ -248,6 +255,8 @@ class HRLLoop:
                     self._pending.append(batch)
                     if len(self._pending) >= cfg.critic_every:
                         pooled, self._pending = TDBatch.cat(self._pending), []
+                        if cfg.critic_pool_weight == "sum":
+                            pooled = dataclasses.replace(pooled, weight=1.0)
                         record(self.filter.update(pooled))
         if train:
             self.episodes += 1

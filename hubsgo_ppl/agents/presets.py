@@ -48,17 +48,19 @@ PRESETS: dict[str, dict[str, Any]] = {
 
 
 _KEYDOOR: dict[str, Any] = {"steps": 40_000, "low": {"shaping": 1.0},
-                            "loop": {"critic_every": 8, "filter_refresh": "episode"}}
+                            "loop": {"critic_every": 8, "critic_pool_weight": "sum", "filter_refresh": "episode"}}
 
 # Per-task settings merged over the family's, as measured for the arm tasks (docs/results.md).
 TASK_PRESETS: dict[str, dict[str, Any]] = {
     # KeyDoor (docs/results.md, session 2): at 15k steps exploration ends before most seeds first reach
     # the goal. Low-level shaping (potential-based, towards each sub-goal's catalogue cell): without it
     # the low level saw a key pick-up every ~3,000 random steps and some seeds first reached the goal
-    # after 17,000-28,000 steps. critic_every 8 pools eight minibatches per critic update (weight 1/8)
-    # to keep the critic's overhead near 1.15; filter_refresh episode keeps a critic split between the
-    # two routes from switching routes mid-episode. On FourRoom the same three settings cost the critic
-    # its single-route G* and the corner result, so FourRoom keeps the family's defaults.
+    # after 17,000-28,000 steps. critic_every 8 pools eight minibatches per critic update to keep the
+    # critic's overhead near 1.15, at the summed likelihood of the 8 x 64 transitions (weight 1; every
+    # KeyDoor result since session 2 was measured so, docs/results.md, session 6). filter_refresh
+    # episode keeps a critic split between the two routes from switching routes mid-episode. On FourRoom
+    # the same three settings cost the critic its single-route G* and the corner result, so FourRoom
+    # keeps the family's defaults.
     "keydoor": _KEYDOOR,
     "keydoor_incorrect": _KEYDOOR,            # preset() deep-copies, so sharing the dict is safe
     "stack_cubes": {"steps": 20_000, "env": {"horizon": 400}, "loop": {"option_steps": 40}},

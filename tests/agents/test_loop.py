@@ -81,6 +81,13 @@ def test_filter_is_updated_once_per_high_level_update_or_every_k():
     assert loop4.high.updates > 8 and filt4.updates == loop4.high.updates // 4
     assert filt4.rows == 4 * filt4.updates * loop4.high.cfg.batch_size     # each minibatch seen once
     assert set(filt4.weights) == {0.25}
+    # critic_pool_weight = "sum": the same pools, each transition at full weight (KeyDoor's preset)
+    loop_sum = _loop(steps=400, extra=["loop.critic_every=4", "loop.critic_pool_weight=sum"])
+    filt_sum = FixedSetFilter([True] * 5)
+    loop_sum.filter = filt_sum
+    while loop_sum.env_steps < 400:
+        loop_sum.run_episode(train=True)
+    assert filt_sum.updates == filt4.updates and set(filt_sum.weights) == {1.0}
     # the minibatches still pending travel with the checkpoint
     pending = loop4.high.updates % 4
     other = _loop(steps=400, extra=["loop.critic_every=4"])
