@@ -61,6 +61,19 @@ def test_shipped_grids(tmp_path):
     assert {v.agent for v in t1.variants} == {"hubsgo", "ddqn", "ppo", "td3", "hdqn", "hiro"}
 
 
+def test_every_shipped_sweep_plans_and_the_ten_seed_grid_extends_the_acceptance_runs(tmp_path):
+    from hubsgo_ppl.resources import sweeps_dir
+
+    for f in sorted(sweeps_dir().glob("*.yaml")):
+        spec, _ = load_sweep(f.stem)
+        assert plan(spec, tmp_path), f.name
+    # run into the same folder, the ten-seed KeyDoor grid reuses the 5-seed acceptance runs as its seeds 0-4
+    five = {j.run_id: j.config for j in plan(load_sweep("keydoor_acceptance")[0], tmp_path)}
+    ten = {j.run_id: j.config for j in plan(load_sweep("keydoor_ten_seeds")[0], tmp_path)}
+    assert len(ten) == 20 and set(five) < set(ten)
+    assert all(ten[k] == five[k] for k in five)
+
+
 def test_sweep_resumes_after_a_killed_worker(tmp_path, monkeypatch):
     """Every hierarchical agent on the other grid tasks (keydoor is in test_run), one worker killed twice."""
     path = _write(tmp_path, tasks=[{"name": "fourroom", "steps": 1}, {"name": "fourroom_incorrect", "steps": 1},
