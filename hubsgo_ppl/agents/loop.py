@@ -18,7 +18,6 @@ per-episode statistics and leaves logging, progress bars and checkpoints to ``ex
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
@@ -254,9 +253,7 @@ class HRLLoop:
                     record(stats)
                     self._pending.append(batch)
                     if len(self._pending) >= cfg.critic_every:
-                        pooled, self._pending = TDBatch.cat(self._pending), []
-                        if cfg.critic_pool_weight == "sum":
-                            pooled = dataclasses.replace(pooled, weight=1.0)
+                        pooled, self._pending = TDBatch.cat(self._pending, cfg.critic_pool_weight), []
                         record(self.filter.update(pooled))
         if train:
             self.episodes += 1

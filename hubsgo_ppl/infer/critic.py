@@ -123,10 +123,13 @@ class TDBatch:
     weight: float = 1.0
 
     @classmethod
-    def cat(cls, batches: "list[TDBatch]") -> "TDBatch":
-        """Pool minibatches into one batch whose likelihood counts as their mean (weight / K)."""
+    def cat(cls, batches: "list[TDBatch]", reduce: str = "mean") -> "TDBatch":
+        """Pool K minibatches into one batch whose likelihood counts as their ``"mean"`` (weight / K)
+        or their ``"sum"`` (every transition at its own weight)."""
         if not batches:
             raise ValueError("TDBatch.cat needs at least one batch")
+        if reduce not in ("mean", "sum"):
+            raise ValueError(f"TDBatch.cat: reduce must be 'mean' or 'sum', got {reduce!r}")
         masks = [b.available for b in batches]
         if any(m is None for m in masks) and not all(m is None for m in masks):
             raise ValueError("TDBatch.cat: either every batch has an `available` mask or none has")
@@ -136,7 +139,7 @@ class TDBatch:
             reward=torch.cat([b.reward for b in batches]),
             discount=torch.cat([b.discount for b in batches]),
             available=None if masks[0] is None else torch.cat(masks),
-            weight=sum(b.weight for b in batches) / len(batches) ** 2,
+            weight=sum(b.weight for b in batches) / len(batches) ** (2 if reduce == "mean" else 1),
         )
 
     def __post_init__(self):
