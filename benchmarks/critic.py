@@ -2,10 +2,12 @@
 
 Run: ``.venv/bin/python benchmarks/critic.py`` (one CPU thread; results go to docs/benchmarks.md).
 
-``--floor`` also times, side by side in one run on a maze spec, one critic update against its two
-parts that our code cannot make cheaper: a bare ``TraceGraph_ELBO`` step with the same residuals,
-particles and baseline but an independent Bernoulli guide (Pyro's own cost per step), and the MH
-burn-in sweeps alone.
+``--floor SPEC`` times, interleaved in one run on a maze spec, one critic update the default way
+(``inference.jit``: the TraceGraph_ELBO step compiled by CompiledTraceGraph_ELBO, the MH sweeps
+compiled with numba) against the eager update (``jit: false``), a bare eager ``TraceGraph_ELBO`` step
+with the same residuals, particles and baseline but an independent Bernoulli guide (Pyro's own cost
+per step), and the MH burn-in sweeps compiled and in the eager torch loop. Both critics take
+bit-identical steps (tests/infer/test_compiled.py), so the ratio is pure speed.
 """
 
 from __future__ import annotations
@@ -95,15 +97,19 @@ def keydoor_budget(preset: str, max_updates: int = 600, seed: int = 0) -> int | 
 
 
 def pyro_floor(spec: str = "fourroom-specific", rounds: int = 5, repeats: int = 40) -> dict[str, float]:
-    """Best-of-``rounds`` ms per call of: a critic update on ``spec``, a bare TraceGraph_ELBO step with an
-    independent Bernoulli guide on the same residuals (no MH), and the update's MH burn-in alone."""
+    """Best-of-``rounds`` ms per call of: a critic update on ``spec`` (compiled, the default, and eager),
+    a bare TraceGraph_ELBO step with an independent Bernoulli guide on the same residuals (no MH), and
+    the update's MH burn-in alone (numba and the eager torch loop)."""
     import pyro.distributions as dist
     from pyro.infer import TraceGraph_ELBO
 
-    from hubsgo_ppl.infer.mh import single_site_sweep
+    from hubsgo_ppl.infer.mh import _eager_sweeps, single_site_sweep
     from hubsgo_ppl.specs import load_model_spec
 
     critic = SubgoalCritic.from_spec(load_model_spec(spec), seed=0)
+    eager_spec = load_model_spec(spec)
+    eager_spec.inference.jit = False
+    eager = SubgoalCritic.from_spec(eager_spec, seed=0)
     n, cfg = critic.n, critic.config
     g = torch.Generator().manual_seed(1)
     batch = TDBatch(torch.rand(64, generator=g), torch.rand(64, n, generator=g), torch.zeros(64),
@@ -127,11 +133,15 @@ def pyro_floor(spec: str = "fourroom-specific", rounds: int = 5, repeats: int = 
             elbo.loss_and_grads(model, guide)
 
     chains = critic._chains.clone()
+    theta, coupling = critic._theta.detach(), critic._coupling.detach()
     calls = {
-        "critic.update": lambda: critic.update(batch),
-        "bare TraceGraph_ELBO step": bare_step,
-        f"{cfg.burn_in} MH sweeps": lambda: single_site_sweep(chains, critic._theta.detach(), critic._coupling.detach(),
-                                                            critic.graph.edge_index, g, sweeps=cfg.burn_in),
+        "critic.update (compiled, default)": lambda: critic.update(batch),
+        "critic.update, inference.jit: false": lambda: eager.update(batch),
+        "bare eager TraceGraph_ELBO step": bare_step,
+        f"{cfg.burn_in} MH sweeps (numba)": lambda: single_site_sweep(chains, theta, coupling, critic.graph.edge_index,
+                                                                   g, sweeps=cfg.burn_in),
+        f"{cfg.burn_in} MH sweeps (eager torch loop)": lambda: _eager_sweeps(chains, theta, coupling,
+                                                                          critic.graph.edge_index, g, cfg.burn_in),
     }
     for call in calls.values():
         for _ in range(5):
@@ -151,14 +161,14 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=20)
     parser.add_argument("--seeds", type=int, default=3, help="seeds for the learning-budget runs")
     parser.add_argument("--floor", default=None, metavar="SPEC",
-                        help="only time an update on this spec against a bare TraceGraph_ELBO step and the MH sweeps")
+                        help="only time an update on this spec, compiled and eager, against a bare TraceGraph_ELBO step and the MH sweeps")
     args = parser.parse_args()
     torch.set_num_threads(1)
     if args.floor:
         best = pyro_floor(args.floor)
-        update = best["critic.update"]
+        update = best["critic.update (compiled, default)"]
         print(f"torch {torch.__version__}, pyro {pyro.__version__}, 1 thread, spec {args.floor}, B = 64")
-        print("\n| call | ms (best of 5 x 40) | share of an update |\n|---|---|---|")
+        print("\n| call | ms (best of 5 x 40) | / compiled update |\n|---|---|---|")
         for name, ms in best.items():
             print(f"| {name} | {ms:.2f} | {ms / update:.2f} |")
         return

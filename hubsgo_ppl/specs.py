@@ -111,6 +111,7 @@ class InferenceSpec(StrictModel):
     exact_max_n: int = Field(16, ge=0, le=20, description="exact log Z up to this N")
     pyro_validation: Literal["first", "always", "never"] = Field(
         "first", description="Pyro validation on the first update only, on every update, or never")
+    jit: bool = Field(True, description="compile the TraceGraph_ELBO step of TDBatch updates (same numbers, faster)")
 
 
 class ModelSpec(StrictModel):

@@ -99,12 +99,15 @@ class PairwiseMRF(TorchDistribution):
         if theta.dim() < 1 or theta.shape[-1] < 1:
             raise ValueError(f"theta must have shape (..., N) with N >= 1, got {tuple(theta.shape)}")
         n = theta.shape[-1]
-        edge_index = torch.as_tensor(edge_index, dtype=torch.long).reshape(-1, 2)
+        edge_index = torch.as_tensor(edge_index, dtype=torch.long)
+        if edge_index.dim() != 2:
+            edge_index = edge_index.reshape(-1, 2)
         if coupling.dim() < 1 or coupling.shape[-1] != edge_index.shape[0]:
             raise ValueError(
                 f"coupling must have shape (..., E) with E = {edge_index.shape[0]} edges, got {tuple(coupling.shape)}"
             )
-        if edge_index.numel():
+        checked = validate_args is not False  # the critic's own guides (validate_args=False) skip these
+        if edge_index.numel() and checked:
             if int(edge_index.min()) < 0 or int(edge_index.max()) >= n:
                 raise ValueError(f"edge_index refers to a site outside 0..{n - 1}")
             if bool((edge_index[:, 0] == edge_index[:, 1]).any()):
@@ -118,13 +121,15 @@ class PairwiseMRF(TorchDistribution):
             raise ValueError(f"burn_in must be a non-negative integer, got {burn_in!r}")
         if not 0 <= exact_max_n <= EXACT_LIMIT:
             raise ValueError(f"exact_max_n must be in 0..{EXACT_LIMIT}, got {exact_max_n}")
-        natural = torch.broadcast_shapes(theta.shape[:-1], coupling.shape[:-1])
+        natural = theta.shape[:-1]
+        if coupling.shape[:-1] != natural:
+            natural = torch.broadcast_shapes(natural, coupling.shape[:-1])
         batch_shape = natural if batch_shape is None else torch.Size(batch_shape)
-        if torch.broadcast_shapes(natural, batch_shape) != batch_shape:
+        if batch_shape != natural and torch.broadcast_shapes(natural, batch_shape) != batch_shape:
             raise ValueError(f"cannot expand parameters of batch shape {tuple(natural)} to {tuple(batch_shape)}")
         if init is not None:
             init = init.detach()
-            if init.shape[-1] != n or not bool(((init == 0) | (init == 1)).all()):
+            if init.shape[-1] != n or (checked and not bool(((init == 0) | (init == 1)).all())):
                 raise ValueError(f"init must be a 0/1 tensor of shape (..., {n})")
         # Parameters are kept unexpanded: an expanded copy per particle would turn the MH field
         # update into a batched matmul and the enumeration into one log Z per particle.
@@ -141,7 +146,7 @@ class PairwiseMRF(TorchDistribution):
 
     @property
     def n(self) -> int:
-        return self.event_shape[0]
+        return int(self.event_shape[0])
 
     @property
     def is_exact(self) -> bool:
@@ -174,7 +179,9 @@ class PairwiseMRF(TorchDistribution):
         """theta . w + sum J_uv w_u w_v, shape ``value.shape[:-1]`` broadcast with the batch shape."""
         value, prov = untrack(value)
         lp = unnormalized_log_prob(value.to(self.theta.dtype), self.theta, self._matrix())
-        return retrack(lp.expand(torch.broadcast_shapes(lp.shape, self.batch_shape)), prov)
+        if self.batch_shape and lp.shape != self.batch_shape:
+            lp = lp.expand(torch.broadcast_shapes(lp.shape, self.batch_shape))
+        return retrack(lp, prov)
 
     def _require_exact(self, what: str) -> None:
         if not self.is_exact:
@@ -200,13 +207,21 @@ class PairwiseMRF(TorchDistribution):
         return self._cache["log_z"]
 
     def log_prob(self, value: torch.Tensor) -> torch.Tensor:
-        """Normalised log q(w) for N <= exact_max_n, else the unnormalised log q~(w) (see module doc)."""
+        """Normalised log q(w) for N <= exact_max_n, else the unnormalised log q~(w) (see module doc).
+
+        The result for the last ``value`` tensor is cached with log Z (same parameters, same answer), so
+        a second call on the same samples, e.g. the critic's entropy diagnostic after Pyro's own
+        ``log_prob``, costs nothing."""
         value, prov = untrack(value)
+        cached = self._cache.get("log_prob")
+        if cached is not None and cached[0] is value and (not self.batch_shape or self.batch_shape == value.shape[:-1]):
+            return retrack(cached[1], prov)
         if self._validate_args:
             self._validate_sample(value)
         lp = self.unnormalized_log_prob(value)
         if self.is_exact:
             lp = lp - self.log_partition()
+        self._cache["log_prob"] = (value, lp)
         return retrack(lp, prov)
 
     def score_parts(self, value: torch.Tensor) -> ScoreParts:

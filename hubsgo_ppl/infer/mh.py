@@ -18,9 +18,12 @@ randomness comes from an explicit ``torch.Generator``. :func:`run_chains` record
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import math
 
+import numba
+import numpy as np
 import torch
 from pyro.infer.mcmc.mcmc_kernel import MCMCKernel
 
@@ -28,6 +31,7 @@ from ..graph import colour_classes
 
 __all__ = [
     "KERNELS",
+    "ChromaticScan",
     "coupling_matrix",
     "unnormalized_log_prob",
     "single_site_sweep",
@@ -53,7 +57,8 @@ def coupling_matrix(coupling: torch.Tensor, edge_index: torch.Tensor, n: int) ->
 def unnormalized_log_prob(w: torch.Tensor, theta: torch.Tensor, mat: torch.Tensor) -> torch.Tensor:
     """log q~(w) = theta.w + sum_(u,v) J_uv w_u w_v (Eq. 1 without log Z), with ``mat`` from
     :func:`coupling_matrix` (each edge appears twice there, hence the 1/2)."""
-    pair = ((w.unsqueeze(-2) @ mat).squeeze(-2) * w).sum(-1)
+    # with one matrix, w @ J is the same mm as the batched form (the same floats), in one op instead of three
+    pair = (((w @ mat) if mat.dim() == 2 else (w.unsqueeze(-2) @ mat).squeeze(-2)) * w).sum(-1)
     return (w * theta).sum(-1) + 0.5 * pair
 
 
@@ -70,6 +75,102 @@ def _check(w: torch.Tensor, theta: torch.Tensor, coupling: torch.Tensor, edge_in
         )
 
 
+@numba.njit(cache=True, nogil=True)
+def _chromatic_sweeps(spin, field, log_u, classes, class_ptr, mat):  # pragma: no cover (compiled)
+    """The sweeps of :func:`single_site_sweep` on flat chains, compiled with numba; in place.
+
+    ``spin`` ``(S, N)`` = 1 - 2w, ``field`` ``(S, N)`` = theta + J w, ``log_u`` ``(T, S, N)`` (one
+    sweep per row), ``classes[class_ptr[c]:class_ptr[c + 1]]`` the sites of colour class c in
+    ascending order, ``mat`` the symmetric ``(N, N)`` coupling matrix. The arithmetic is the eager
+    loop's: accept where ``log u < spin * field``, ``spin -= 2 dw`` and ``field += dw J`` summed over
+    the class in ascending site order, so both give the same floats (tests/infer/test_mh.py).
+    """
+    num_chains, n = spin.shape
+    dw = np.zeros(n, dtype=spin.dtype)
+    two = spin.dtype.type(2.0)
+    for t in range(log_u.shape[0]):
+        for c in range(class_ptr.shape[0] - 1):
+            lo, hi = class_ptr[c], class_ptr[c + 1]
+            for s in range(num_chains):
+                flipped = False
+                for q in range(lo, hi):
+                    i = classes[q]
+                    if log_u[t, s, i] < spin[s, i] * field[s, i]:
+                        dw[i] = spin[s, i]
+                        flipped = True
+                if not flipped:
+                    continue
+                for q in range(lo, hi):
+                    i = classes[q]
+                    spin[s, i] -= two * dw[i]
+                for j in range(n):
+                    acc = spin.dtype.type(0.0)
+                    for q in range(lo, hi):
+                        acc += dw[classes[q]] * mat[classes[q], j]
+                    field[s, j] += acc
+                for q in range(lo, hi):
+                    dw[classes[q]] = 0.0
+
+
+_LOG_U_ELEMENTS = 1 << 22  # cap on one block of log-uniforms (16 MB in float32)
+_RAND_BLOCK = 32  # most sweeps whose uniforms are drawn in one call (the same stream as one call per sweep)
+
+
+@numba.njit(cache=True, nogil=True)
+def _scan_state(w, theta, coupling, u, v):  # pragma: no cover (compiled)
+    """``(spin, field, mat)`` for :func:`_chromatic_sweeps`, computed as the eager loop does: J placed at
+    (u, v) and (v, u), ``field = theta + w J`` summed in ascending site order (w is 0/1, so every
+    product is exact), ``spin = 1 - 2w``."""
+    num_chains, n = w.shape
+    mat = np.zeros((n, n), dtype=theta.dtype)
+    for e in range(u.shape[0]):
+        mat[u[e], v[e]] = coupling[e]
+        mat[v[e], u[e]] = coupling[e]
+    field = np.empty((num_chains, n), dtype=theta.dtype)
+    spin = np.empty((num_chains, n), dtype=theta.dtype)
+    for s in range(num_chains):
+        for j in range(n):
+            acc = theta.dtype.type(0.0)
+            for k in range(n):
+                acc += w[s, k] * mat[k, j]
+            field[s, j] = theta[j] + acc
+            spin[s, j] = 1.0 - 2.0 * w[s, j]
+    return spin, field, mat
+
+
+class ChromaticScan:
+    """:func:`single_site_sweep` for flat chains ``(S, N)`` on CPU for one graph, compiled with numba
+    (:func:`_scan_state`, :func:`_chromatic_sweeps`), with the colour classes computed once. The result
+    is identical to the eager loop's (tests/infer/test_mh.py checks it)."""
+
+    def __init__(self, edge_index: torch.Tensor, n: int):
+        self.edge_index = torch.as_tensor(edge_index, dtype=torch.long).reshape(-1, 2)
+        self.n = int(n)
+        self.u = self.edge_index[:, 0].numpy().copy()
+        self.v = self.edge_index[:, 1].numpy().copy()
+        classes = [sorted(idx.tolist()) for idx in colour_classes(self.edge_index, self.n)]
+        self.classes = np.array([i for c in classes for i in c], dtype=np.int64)
+        self.class_ptr = np.cumsum([0] + [len(c) for c in classes]).astype(np.int64)
+
+    def __call__(self, w: torch.Tensor, theta: torch.Tensor, coupling: torch.Tensor,
+                 generator: torch.Generator | None, sweeps: int = 1) -> torch.Tensor:
+        dtype = theta.dtype
+        theta_np = theta.detach().contiguous().numpy()
+        spin, field, mat = _scan_state(w.detach().to(dtype).contiguous().numpy(), theta_np,
+                                       coupling.detach().to(dtype).contiguous().numpy(), self.u, self.v)
+        step = max(1, min(_RAND_BLOCK, _LOG_U_ELEMENTS // max(w.numel(), 1)))
+        for start in range(0, sweeps, step):
+            block = min(step, sweeps - start)
+            log_u = torch.rand((block,) + tuple(w.shape), generator=generator, dtype=dtype).log_()
+            _chromatic_sweeps(spin, field, log_u.numpy(), self.classes, self.class_ptr, mat)
+        return torch.from_numpy((1.0 - spin) * 0.5)
+
+
+@functools.lru_cache(maxsize=64)
+def _scan_for(pairs: tuple, n: int) -> ChromaticScan:
+    return ChromaticScan(torch.tensor(pairs, dtype=torch.long).reshape(-1, 2), n)
+
+
 def single_site_sweep(
     w: torch.Tensor,
     theta: torch.Tensor,
@@ -81,9 +182,25 @@ def single_site_sweep(
     """Run ``sweeps`` chromatic single-site MH sweeps on the batched chains ``w`` (..., N); returns new w.
 
     Flipping site i changes log q by ``(1 - 2 w_i) * h_i`` with the local field
-    ``h = theta + J w``; the field is updated incrementally after each colour class.
+    ``h = theta + J w``; the field is updated incrementally after each colour class. Flat chains
+    ``(S, N)`` with one parameter set on CPU (the critic's case) run compiled in :class:`ChromaticScan`,
+    anything else in the eager torch loop; both give the same result.
     """
     _check(w, theta, coupling, edge_index)
+    n = w.shape[-1]
+    if _compiled_case(w, theta, coupling):
+        return _scan_for(tuple(tuple(p) for p in edge_index.tolist()), n)(w, theta, coupling, generator, sweeps)
+    return _eager_sweeps(w, theta, coupling, edge_index, generator, sweeps)
+
+
+def _compiled_case(w: torch.Tensor, theta: torch.Tensor, coupling: torch.Tensor) -> bool:
+    """Flat chains and one parameter set, on CPU in float32/64: what :class:`ChromaticScan` runs."""
+    return (w.dim() == 2 and theta.dim() == 1 and coupling.dim() == 1 and w.device.type == "cpu"
+            and theta.device.type == "cpu" and theta.dtype in (torch.float32, torch.float64))
+
+
+def _eager_sweeps(w, theta, coupling, edge_index, generator, sweeps: int) -> torch.Tensor:
+    """The reference loop of :func:`single_site_sweep` in plain torch (any batch shape or device)."""
     n = w.shape[-1]
     with torch.no_grad():
         mat = coupling_matrix(coupling, edge_index, n)
@@ -92,7 +209,8 @@ def single_site_sweep(
         spin = 1.0 - 2.0 * w  # +1 where w = 0: flipping site i changes log q by spin_i * field_i
         # log-uniforms are pushed to +inf off the current colour class, so one comparison both
         # decides the MH accept and restricts the flips to that class (no gather/scatter).
-        off_class = [torch.full((n,), math.inf, dtype=w.dtype).index_fill_(0, idx, 0.0) for idx in colour_classes(edge_index, n)]
+        off_class = [torch.full((n,), math.inf, dtype=w.dtype, device=w.device).index_fill_(0, idx.to(w.device), 0.0)
+                     for idx in colour_classes(edge_index, n)]
         has_edges = edge_index.numel() > 0
         flat = mat.dim() == 2 and w.dim() == 2
         for _ in range(sweeps):

@@ -108,7 +108,9 @@ class BernoulliSet(TorchDistribution):
             self._validate_sample(value)
         k = value.sum(-1)
         lp = k * self._log_p + (self.n - k) * self._log_not_p
-        return retrack(lp.expand(torch.broadcast_shapes(lp.shape, self.batch_shape)), prov)
+        if lp.shape != self.batch_shape:
+            lp = lp.expand(torch.broadcast_shapes(lp.shape, self.batch_shape))
+        return retrack(lp, prov)
 
     def sample(self, sample_shape=torch.Size()):
         shape = self._extended_shape(sample_shape)
@@ -144,7 +146,9 @@ class BetaBernoulliSet(TorchDistribution):
             self._validate_sample(value)
         k = value.sum(-1)
         lp = self._log_beta(self.alpha + k, self.beta + self.n - k) - self._log_beta(self.alpha, self.beta)
-        return retrack(lp.expand(torch.broadcast_shapes(lp.shape, self.batch_shape)), prov)
+        if lp.shape != self.batch_shape:
+            lp = lp.expand(torch.broadcast_shapes(lp.shape, self.batch_shape))
+        return retrack(lp, prov)
 
     def sample(self, sample_shape=torch.Size()):
         shape = self._extended_shape(sample_shape)

@@ -13,6 +13,7 @@ import pytest
 import torch
 
 from hubsgo_ppl.distributions import PairwiseMRF, state_table
+from hubsgo_ppl.infer import mh
 from hubsgo_ppl.infer.mh import MRFMHKernel, block_flip_step, run_chains, single_site_sweep
 
 TV_TOL = 0.03
@@ -54,6 +55,45 @@ def test_negative_control_ignoring_couplings_fails_the_check():
     theta, coupling, ei = random_mrf(6, seed=16)
     samples = run_chains(theta, torch.zeros_like(coupling), ei, 1000, 20, generator=torch.Generator().manual_seed(0), burn_in=30)
     assert tv(samples, theta, coupling, ei)[0] > 3 * TV_TOL
+
+
+def _graph(kind: str, n: int) -> torch.Tensor:
+    pairs = {
+        "chain": [(i, i + 1) for i in range(n - 1)],
+        "bipartite": [(i, j) for i in range(n // 2) for j in range(n // 2, n)],   # two classes of n/2
+        "complete": [(i, j) for i in range(n) for j in range(i + 1, n)],          # n classes of one
+        "none": [],
+    }[kind]
+    return torch.tensor(pairs, dtype=torch.long).reshape(-1, 2)
+
+
+@pytest.mark.parametrize("kind", ["chain", "bipartite", "complete", "none"])
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_compiled_scan_is_the_eager_loop_to_the_last_bit(kind, dtype):
+    """Flat chains run in numba (ChromaticScan); they must give exactly the eager torch loop's states and
+    leave the generator where the eager loop leaves it, for any graph, chain count and sweep count."""
+    n = 8
+    ei = _graph(kind, n)
+    g = torch.Generator().manual_seed(len(kind))
+    for num_chains, sweeps in [(1, 1), (64, 32), (300, 70)]:
+        theta = 2 * torch.randn(n, generator=g, dtype=dtype)
+        coupling = 2 * torch.randn(ei.shape[0], generator=g, dtype=dtype)
+        w = torch.randint(0, 2, (num_chains, n), generator=g).to(dtype)
+        ga, gb = torch.Generator().manual_seed(sweeps), torch.Generator().manual_seed(sweeps)
+        compiled = single_site_sweep(w, theta, coupling, ei, ga, sweeps=sweeps)
+        eager = mh._eager_sweeps(w, theta, coupling, ei, gb, sweeps)
+        assert compiled.dtype == eager.dtype == dtype
+        assert torch.equal(compiled, eager), (kind, num_chains, sweeps)
+        assert torch.equal(ga.get_state(), gb.get_state())
+
+
+def test_compiled_scan_blocks_of_uniforms_keep_the_stream(monkeypatch):
+    """Uniforms are drawn in blocks of sweeps (capped in memory); the block size must not change a draw."""
+    theta, coupling, ei = random_mrf(6, seed=3)
+    w = torch.zeros(50, 6)
+    full = single_site_sweep(w, theta, coupling, ei, torch.Generator().manual_seed(4), sweeps=40)
+    monkeypatch.setattr(mh, "_LOG_U_ELEMENTS", 50 * 6 * 3)     # three sweeps per block
+    assert torch.equal(full, single_site_sweep(w, theta, coupling, ei, torch.Generator().manual_seed(4), sweeps=40))
 
 
 def test_kernels_keep_shapes_and_are_seeded():
