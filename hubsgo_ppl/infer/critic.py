@@ -236,9 +236,9 @@ class CompiledTraceGraph_ELBO(TraceGraph_ELBO):
     """
 
     def __init__(self, model: Callable, guide: Callable, baseline_sites: tuple[str, ...] = (),
-                 extras: Callable[[], tuple] | None = None, **kwargs):
+                 extras: Callable[[], tuple] | None = None, simplify: bool = True, **kwargs):
         super().__init__(**kwargs)
-        self.model, self.guide, self.extras = model, guide, extras
+        self.model, self.guide, self.extras, self.simplify = model, guide, extras, simplify
         self._baselines = tuple("__baseline_avg_downstream_cost_" + site for site in baseline_sites)
         self._compiled: dict = {}
         self.extra_values: tuple[torch.Tensor, ...] = ()
@@ -261,7 +261,11 @@ class CompiledTraceGraph_ELBO(TraceGraph_ELBO):
             # torch 2.13 marks torch.jit.trace deprecated (as it does for Pyro's own JitTraceGraph_ELBO);
             # it works on the pinned torch, and `inference.jit: false` is the eager fallback
             warnings.simplefilter("ignore", DeprecationWarning)
-            return torch.jit.trace(run, inputs + args, check_trace=False)
+            traced = torch.jit.trace(run, inputs + args, check_trace=False)
+        if self.simplify:  # fold what the trace recorded on constants, drop dead and repeated ops
+            for graph_pass in (torch._C._jit_pass_constant_propagation, torch._C._jit_pass_dce, torch._C._jit_pass_cse):
+                graph_pass(traced.graph)
+        return traced
 
     def loss_and_grads(self, model, guide, *args, **kwargs) -> float:
         """Pyro's ELBO interface, on the global param store (see :meth:`step`)."""
