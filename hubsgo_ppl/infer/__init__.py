@@ -13,6 +13,7 @@ _EXPORTS = {
     "block_flip_step": "mh",
     "run_chains": "mh",
     "MRFMHKernel": "mh",
+    "ChromaticScan": "mh",
     "register_prior": "priors",
     "get_prior": "priors",
     "PRIORS": "priors",
@@ -24,6 +25,7 @@ _EXPORTS = {
     "InferenceConfig": "critic",
     "TDBatch": "critic",
     "SubgoalCritic": "critic",
+    "CompiledTraceGraph_ELBO": "critic",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -79,7 +79,8 @@ class InferenceConfig:
     # passes it once passes it every time (the shapes do not change between updates)
     pyro_validation: str = "first"
     # compile the TraceGraph_ELBO step for TDBatch updates with torch.jit.trace (CompiledTraceGraph_ELBO):
-    # the same estimator, ~6x less Python overhead per step; callables always run eagerly
+    # the same estimator and the same numbers, an update ~3.4x faster (benchmarks/critic.py --floor);
+    # callables always run eagerly
     jit: bool = True
 
     def __post_init__(self):
@@ -293,8 +294,9 @@ class CompiledTraceGraph_ELBO(TraceGraph_ELBO):
         if key not in self._compiled:
             cons = {n: state["constraints"][n] for n in names}
             self._compiled[key] = self._compile(names, cons, inputs, args, kwargs)
-        # Run the trace as recorded: the executor's profiling and optimisation passes cost ~0.2 s over
-        # the first calls for a ~3% faster graph afterwards, a loss over a 15,000-step FourRoom run.
+        # Run the (already simplified) trace as it is: the executor's profiling and optimisation runs
+        # cost ~0.2 s over the first calls and bought ~3% per call afterwards, a net loss over a
+        # 15,000-step FourRoom run (about 1,620 updates).
         with torch.jit.optimized_execution(False):
             elbo, surrogate_loss, *rest = self._compiled[key](*inputs, *args)
         surrogate_loss.backward(retain_graph=self.retain_graph)
