@@ -13,7 +13,7 @@ import torch
 from pyro.distributions import TorchDistribution
 from pyro.ops.provenance import ProvenanceTensor, detach_provenance, get_provenance, track_provenance
 
-__all__ = ["untrack", "retrack", "WithProvenance"]
+__all__ = ["untrack", "retrack", "WithProvenance", "to_batch_shape"]
 
 
 def untrack(x: torch.Tensor) -> tuple[torch.Tensor, frozenset]:
@@ -21,6 +21,14 @@ def untrack(x: torch.Tensor) -> tuple[torch.Tensor, frozenset]:
     if isinstance(x, ProvenanceTensor):
         return detach_provenance(x), get_provenance(x)
     return x, frozenset()
+
+
+def to_batch_shape(lp: torch.Tensor, batch_shape: torch.Size) -> torch.Tensor:
+    """``lp`` expanded to broadcast with a distribution's batch shape; as it is when it already has that
+    shape (no broadcast_shapes call, which a trace would record as ops)."""
+    if lp.shape == batch_shape:
+        return lp
+    return lp.expand(torch.broadcast_shapes(lp.shape, batch_shape))
 
 
 def retrack(x: torch.Tensor, provenance: frozenset) -> torch.Tensor:

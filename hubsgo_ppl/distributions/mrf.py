@@ -29,7 +29,7 @@ from pyro.distributions import TorchDistribution
 from pyro.distributions.score_parts import ScoreParts
 from torch.distributions import constraints
 
-from ._provenance import retrack, untrack
+from ._provenance import retrack, to_batch_shape, untrack
 from ..infer.mh import KERNELS, coupling_matrix, mh_steps, unnormalized_log_prob
 
 __all__ = ["PairwiseMRF", "state_table", "EXACT_LIMIT"]
@@ -179,9 +179,7 @@ class PairwiseMRF(TorchDistribution):
         """theta . w + sum J_uv w_u w_v, shape ``value.shape[:-1]`` broadcast with the batch shape."""
         value, prov = untrack(value)
         lp = unnormalized_log_prob(value.to(self.theta.dtype), self.theta, self._matrix())
-        if self.batch_shape and lp.shape != self.batch_shape:
-            lp = lp.expand(torch.broadcast_shapes(lp.shape, self.batch_shape))
-        return retrack(lp, prov)
+        return retrack(to_batch_shape(lp, self.batch_shape) if self.batch_shape else lp, prov)
 
     def _require_exact(self, what: str) -> None:
         if not self.is_exact:

@@ -371,7 +371,7 @@ class SubgoalCritic:
         self._optim = torch.optim.Adam([self._theta, self._coupling], lr=cfg.lr)
         self._elbo = TraceGraph_ELBO(num_particles=cfg.num_samples, vectorize_particles=True, max_plate_nesting=0)
         self._baseline = {"use_decaying_avg_baseline": True, "baseline_beta": cfg.baseline_beta}
-        self._batch_site: tuple = ()  # (guide distribution, draws) of the last _batch_guide call
+        self._batch_site: tuple = ()  # (guide distribution, sample) of the last guide call, eager or compiled
         self._compiled_elbo = CompiledTraceGraph_ELBO(
             self._batch_model, self._batch_guide, baseline_sites=("w",), extras=self._batch_stats,
             num_particles=cfg.num_samples, vectorize_particles=True, max_plate_nesting=0,
@@ -380,10 +380,6 @@ class SubgoalCritic:
         self._scan = ChromaticScan(self._edge_index, self.n) if cfg.kernel == "single_site" else None
         self._last_samples: torch.Tensor | None = None
         self._unique: tuple | None = None       # (samples, configs, counts) for filtered_set's reads
-        # q(w; lambda) on views of the live parameters, for the entropy diagnostic (its log Z cache is
-        # cleared before each use)
-        self._q_view = PairwiseMRF(self._theta.detach(), self._coupling.detach(), self._edge_index,
-                                   exact_max_n=cfg.exact_max_n, validate_args=False)
         self.num_updates = 0
 
     @classmethod
@@ -427,6 +423,7 @@ class SubgoalCritic:
             validate_args=False,
         )
         w = pyro.sample("w", d, infer={"baseline": self._baseline})
+        self._batch_site = (d, w)
         self._chains = detach_provenance(w).detach().clone()
 
     # The same model and guide for a TDBatch, with every tensor an argument (what torch.jit.trace needs)
@@ -447,8 +444,9 @@ class SubgoalCritic:
         self._batch_site = (d, w)
 
     def _batch_stats(self) -> tuple[torch.Tensor, torch.Tensor]:
-        """The update's diagnostics as outputs of the compiled step: mean log q(w) of the draws (for the
-        entropy; Pyro's own log_prob of them is cached) and the mean set size."""
+        """The update's diagnostics from the last guide call (outputs of the compiled step): mean log q(w)
+        of the samples under q before the step (for the entropy; Pyro's own log_prob of them is cached)
+        and the mean set size."""
         d, w = self._batch_site
         return d.log_prob(w).mean(), w.sum(-1).mean()
 
@@ -495,7 +493,6 @@ class SubgoalCritic:
         fn, weight = self._as_fn(residual_fn)
         self._theta.grad = None
         self._coupling.grad = None
-        self._step_stats = None
         validate = self.config.pyro_validation == "always" or (
             self.config.pyro_validation == "first" and self.num_updates == 0)
         if self._compiled_elbo is not None and isinstance(residual_fn, TDBatch) and not validate:
@@ -506,6 +503,8 @@ class SubgoalCritic:
         else:
             with pyro.get_param_store().scope(state=self._param_state), pyro.validation_enabled(validate):
                 loss = self._elbo.loss_and_grads(self._model, self._guide, fn, weight)
+            with torch.no_grad():
+                self._step_stats = tuple(x.detach() for x in self._batch_stats())
         self._last_samples = self._chains
         if not math.isfinite(loss):
             raise FloatingPointError(
@@ -545,14 +544,9 @@ class SubgoalCritic:
         with torch.no_grad():
             grad_sq = sum(self._grad_sq)
             samples = self._last_samples
-            stats = self._step_stats  # (mean log q(w), mean set size) from the compiled step, or None
-            if self._q_view.is_exact:  # q before the step: the samples' distribution
-                if stats is None:
-                    self._q_view._cache.clear()
-                    entropy = -float(self._q_view.log_prob(samples).mean())
-                else:
-                    entropy = -float(stats[0])
-                exact = 1.0
+            mean_log_q, mean_set_size = self._step_stats  # under q before the step: the samples' distribution
+            if self.n <= self.config.exact_max_n:
+                entropy, exact = -float(mean_log_q), 1.0
             else:
                 m = samples.mean(0).clamp(1e-6, 1 - 1e-6)
                 entropy, exact = float(-(m * m.log() + (1 - m) * (1 - m).log()).sum()), 0.0
@@ -569,7 +563,7 @@ class SubgoalCritic:
                 "grad_norm": math.sqrt(grad_sq),
                 "entropy": entropy,
                 "entropy_is_exact": exact,
-                "mean_set_size": float(samples.sum(-1).mean()) if stats is None else float(stats[1]),
+                "mean_set_size": float(mean_set_size),
                 "unique_configs": float(configs.shape[0]),
                 "theta_abs_max": theta_abs_max,
             }

@@ -118,8 +118,8 @@ _RAND_BLOCK = 32  # most sweeps whose uniforms are drawn in one call (the same s
 
 @numba.njit(cache=True, nogil=True)
 def _scan_state(w, theta, coupling, u, v):  # pragma: no cover (compiled)
-    """``(spin, field, mat)`` for :func:`_chromatic_sweeps`, computed as the eager loop does: J placed at
-    (u, v) and (v, u), ``field = theta + w J`` summed in ascending site order (w is 0/1, so every
+    """``(spin, field, mat)`` for :func:`_chromatic_sweeps`, computed as the eager loop does: ``mat`` is
+    :func:`coupling_matrix` (restated here because numba cannot call torch), J placed at (u, v) and (v, u), ``field = theta + w J`` summed in ascending site order (w is 0/1, so every
     product is exact), ``spin = 1 - 2w``."""
     num_chains, n = w.shape
     mat = np.zeros((n, n), dtype=theta.dtype)
@@ -144,19 +144,18 @@ class ChromaticScan:
     is identical to the eager loop's (tests/infer/test_mh.py checks it)."""
 
     def __init__(self, edge_index: torch.Tensor, n: int):
-        self.edge_index = torch.as_tensor(edge_index, dtype=torch.long).reshape(-1, 2)
+        edge_index = torch.as_tensor(edge_index, dtype=torch.long).reshape(-1, 2)
         self.n = int(n)
-        self.u = self.edge_index[:, 0].numpy().copy()
-        self.v = self.edge_index[:, 1].numpy().copy()
-        classes = [sorted(idx.tolist()) for idx in colour_classes(self.edge_index, self.n)]
+        self.u = edge_index[:, 0].numpy().copy()
+        self.v = edge_index[:, 1].numpy().copy()
+        classes = [sorted(idx.tolist()) for idx in colour_classes(edge_index, self.n)]
         self.classes = np.array([i for c in classes for i in c], dtype=np.int64)
         self.class_ptr = np.cumsum([0] + [len(c) for c in classes]).astype(np.int64)
 
     def __call__(self, w: torch.Tensor, theta: torch.Tensor, coupling: torch.Tensor,
                  generator: torch.Generator | None, sweeps: int = 1) -> torch.Tensor:
         dtype = theta.dtype
-        theta_np = theta.detach().contiguous().numpy()
-        spin, field, mat = _scan_state(w.detach().to(dtype).contiguous().numpy(), theta_np,
+        spin, field, mat = _scan_state(w.detach().to(dtype).contiguous().numpy(), theta.detach().contiguous().numpy(),
                                        coupling.detach().to(dtype).contiguous().numpy(), self.u, self.v)
         step = max(1, min(_RAND_BLOCK, _LOG_U_ELEMENTS // max(w.numel(), 1)))
         for start in range(0, sweeps, step):

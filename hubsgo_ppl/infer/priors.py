@@ -19,7 +19,7 @@ import torch
 from pyro.distributions import TorchDistribution
 from torch.distributions import constraints
 
-from ..distributions._provenance import retrack, untrack
+from ..distributions._provenance import retrack, to_batch_shape, untrack
 from ..distributions.mrf import EXACT_LIMIT, PairwiseMRF
 from ..graph import SubgoalGraph
 from ._registry import build, make_register
@@ -108,9 +108,7 @@ class BernoulliSet(TorchDistribution):
             self._validate_sample(value)
         k = value.sum(-1)
         lp = k * self._log_p + (self.n - k) * self._log_not_p
-        if lp.shape != self.batch_shape:
-            lp = lp.expand(torch.broadcast_shapes(lp.shape, self.batch_shape))
-        return retrack(lp, prov)
+        return retrack(to_batch_shape(lp, self.batch_shape), prov)
 
     def sample(self, sample_shape=torch.Size()):
         shape = self._extended_shape(sample_shape)
@@ -146,9 +144,7 @@ class BetaBernoulliSet(TorchDistribution):
             self._validate_sample(value)
         k = value.sum(-1)
         lp = self._log_beta(self.alpha + k, self.beta + self.n - k) - self._log_beta(self.alpha, self.beta)
-        if lp.shape != self.batch_shape:
-            lp = lp.expand(torch.broadcast_shapes(lp.shape, self.batch_shape))
-        return retrack(lp, prov)
+        return retrack(to_batch_shape(lp, self.batch_shape), prov)
 
     def sample(self, sample_shape=torch.Size()):
         shape = self._extended_shape(sample_shape)
