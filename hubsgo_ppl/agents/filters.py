@@ -2,13 +2,24 @@
 
 - :class:`CriticFilter` (HUBS-GO): Ĝt is the most probable configuration among the critic's current MH
   samples (Sec. 3.4), optionally among those agreeing with the sub-goals already achieved, and each
-  high-level minibatch drives one critic update (Algorithm 1, lines 9-11).
+  high-level minibatch drives one critic update (Algorithm 1, lines 9-11). It also keeps the achieved
+  sets of the last ``outcome_window`` successful episodes: the evidence of outcome likelihoods, and
+  the safeguard below.
 - :class:`NoFilter` (h-DQN): the high level always chooses from G0.
+
+The safeguard. A critic can learn nonsense (a TD likelihood whose evidence is flat, a prior that
+outweighs it) and drop from Ĝt a sub-goal every success needs, such as the goal itself; a high level
+restricted to that Ĝt can then no longer succeed, and gathers no evidence to correct it. So Ĝt always
+contains every sub-goal that was achieved in at least ``keep_fraction`` of the recent successful
+episodes: what the agent's own successes show to be needed is never filtered out. Sub-goals the critic
+adds are kept too (the guard only adds), and before the first success the guard is empty. The loop's
+other guard is ``filter_end`` < 1: the high level still chooses from G0 in a share of its decisions.
 """
 
 from __future__ import annotations
 
 import math
+from collections import deque
 from typing import Any, Protocol
 
 import numpy as np
@@ -31,6 +42,9 @@ class SubgoalFilter(Protocol):
     def update(self, batch: HighLevelBatch) -> dict[str, float]:
         """Learn from one high-level minibatch; returns scalars to log."""
 
+    def end_episode(self, visited: np.ndarray, success: bool) -> None:
+        """An episode ended; ``visited`` (N,) bool: the sub-goals achieved at any step of it."""
+
     def state_dict(self) -> dict[str, Any]: ...
 
     def load_state_dict(self, state: dict[str, Any]) -> None: ...
@@ -47,6 +61,9 @@ class NoFilter:
     def update(self, batch: HighLevelBatch) -> dict[str, float]:
         return {}
 
+    def end_episode(self, visited: np.ndarray, success: bool) -> None:
+        return None
+
     def state_dict(self) -> dict[str, Any]:
         return {}
 
@@ -56,27 +73,63 @@ class NoFilter:
 
 
 class CriticFilter:
-    """HUBS-GO: the Bayesian sub-goal critic filters G0 to Ĝt (Sec. 3.3-3.4)."""
+    """HUBS-GO: the Bayesian sub-goal critic filters G0 to Ĝt (Sec. 3.3-3.4), with the safeguard of the
+    module docstring (``keep_fraction``; 0 turns it off)."""
 
     name = "critic"
 
-    def __init__(self, critic: Any):
+    def __init__(self, critic: Any, outcome_window: int = 20, keep_fraction: float = 0.5):
+        if int(outcome_window) < 1:
+            raise ValueError(f"loop.outcome_window must be a positive integer, got {outcome_window!r}")
+        if not 0.0 <= float(keep_fraction) <= 1.0:
+            raise ValueError(f"loop.filter_keep must be in [0, 1] (0 turns the safeguard off), got {keep_fraction!r}")
         self.critic = critic
+        self.keep_fraction = float(keep_fraction)
         self._mask: np.ndarray | None = None   # None until the first update: Ĝt = G0
+        self._outcomes: deque[np.ndarray] = deque(maxlen=int(outcome_window))
+        self._keep = np.zeros(critic.n, dtype=bool)
+        self._needs_outcomes = getattr(critic.likelihood, "evidence", "td") == "outcomes"
 
     def allowed(self, achieved: np.ndarray | None = None) -> np.ndarray | None:
         """The mode of the last update's samples; given ``achieved``, the mode of those samples that
         include every achieved sub-goal (``SubgoalCritic.filtered_set``), so that a route the agent
-        has committed to (it holds the blue key) is the one Ĝt names."""
-        if self._mask is None or achieved is None:
-            return self._mask
+        has committed to (it holds the blue key) is the one Ĝt names. Either way joined with the
+        safeguard's sub-goals."""
+        if self._mask is None:
+            return None
+        if achieved is None:
+            return self._mask | self._keep
         given = torch.as_tensor(np.asarray(achieved, dtype=bool))
-        return self.critic.filtered_set(given=given).cpu().numpy().astype(bool)
+        return self.critic.filtered_set(given=given).cpu().numpy().astype(bool) | self._keep
+
+    def end_episode(self, visited: np.ndarray, success: bool) -> None:
+        if not success:
+            return
+        self._outcomes.append(np.asarray(visited, dtype=bool).copy())
+        self._refresh_keep()
+
+    def _refresh_keep(self) -> None:
+        if self.keep_fraction <= 0 or not self._outcomes:
+            self._keep = np.zeros(self.critic.n, dtype=bool)
+            return
+        share = np.mean(np.stack(self._outcomes), axis=0)
+        self._keep = share >= self.keep_fraction
+
+    def outcomes(self) -> torch.Tensor:
+        """The achieved sets of the recent successful episodes, (E, N) float, oldest first."""
+        if not self._outcomes:
+            return torch.zeros(0, self.critic.n)
+        return torch.as_tensor(np.stack(self._outcomes), dtype=torch.float32)
 
     def update(self, batch: HighLevelBatch) -> dict[str, float]:
         """One critic update on the minibatch. The TDBatch itself goes to the critic, not its
         ``residuals`` method, so that its ``weight`` scales the likelihood: a pool of K minibatches counts
-        as their mean or their sum (``loop.critic_pool_weight``)."""
+        as their mean or their sum (``loop.critic_pool_weight``). An outcome likelihood gets the recent
+        successes attached; before the first success it has no evidence, and no update runs (Ĝt = G0)."""
+        if self._needs_outcomes:
+            if not self._outcomes:
+                return {}
+            batch.outcomes = self.outcomes()
         diag = self.critic.update(batch)
         loss = diag.get("loss", float("nan"))
         if not math.isfinite(loss):
@@ -86,6 +139,7 @@ class CriticFilter:
         self._mask = self.critic.filtered_set().cpu().numpy().astype(bool)
         out = {f"critic/{k}": float(v) for k, v in diag.items() if isinstance(v, (int, float))}
         out["critic/set_size"] = float(self._mask.sum())
+        out["critic/kept"] = float((self._keep & ~self._mask).sum())    # sub-goals only the safeguard adds
         return out
 
     def marginals(self) -> np.ndarray:
@@ -93,8 +147,13 @@ class CriticFilter:
 
     def state_dict(self) -> dict[str, Any]:
         return {"critic": self.critic.state_dict(),
-                "mask": None if self._mask is None else torch.as_tensor(self._mask)}
+                "mask": None if self._mask is None else torch.as_tensor(self._mask),
+                "outcomes": self.outcomes()}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.critic.load_state_dict(state["critic"])
         self._mask = None if state["mask"] is None else state["mask"].numpy().astype(bool)
+        self._outcomes.clear()
+        for row in state.get("outcomes", torch.zeros(0, self.critic.n)):
+            self._outcomes.append(row.numpy().astype(bool))
+        self._refresh_keep()

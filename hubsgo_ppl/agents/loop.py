@@ -25,7 +25,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from ..infer.critic import TDBatch
+from ..infer.tdbatch import TDBatch
 from .filters import SubgoalFilter
 from .high_level import HighLevelDQN
 from .schedules import LinearSchedule
@@ -45,8 +45,14 @@ class LoopConfig:
     low_explore_end: float = 0.05
     low_explore_fraction: float = 0.3
     filter_start: float = 0.0                   # Sec. 3.4: probability of choosing from Ĝt (rises)
-    filter_end: float = 1.0
+    # below 1, so that a share of the high level's decisions always reads G0: one of the two guards
+    # against a critic that learns nonsense (the other is filter_keep; agents/filters.py)
+    filter_end: float = 0.9
     filter_fraction: float = 0.5
+    # the filter keeps the achieved sets of the last outcome_window successful episodes (the evidence
+    # of outcome likelihoods); Ĝt always holds the sub-goals achieved in at least filter_keep of them
+    outcome_window: int = 20
+    filter_keep: float = 0.5
     eval_filter: float = 1.0                    # greedy evaluation chooses from Ĝt with this probability
     # h-DQN's per-goal annealing (Kulkarni et al. 2016): the low level's ε for goal g is at least
     # min(low_explore_cap, 1 - its recent success rate on g), so goals it cannot reach yet keep being
@@ -73,7 +79,7 @@ class LoopConfig:
     # While training, a low-level step in a state where the greedy low level already acted under the
     # same sub-goal in this episode is taken at random: back there, the greedy policy would repeat a
     # path that did not reach the sub-goal, and in a deterministic env a greedy cycle never ends by
-    # itself (docs/results.md, session 4: all of KeyDoor's late timeouts). States reached after a
+    # itself (this caused every late KeyDoor timeout, docs/results.md). States reached after a
     # random step are not marked, so one ε-step does not start a random walk. Discrete action spaces
     # with a learned low level only; greedy evaluation is unaffected.
     low_break_cycles: bool = True
@@ -85,6 +91,8 @@ class LoopConfig:
             raise ValueError(f"loop.schedule_from must be 'start' or 'first_reward', got {self.schedule_from!r}")
         if self.critic_pool_weight not in ("mean", "sum"):
             raise ValueError(f"loop.critic_pool_weight must be 'mean' or 'sum', got {self.critic_pool_weight!r}")
+        if not 0.0 <= self.filter_end <= 1.0 or not 0.0 <= self.filter_start <= 1.0:
+            raise ValueError(f"loop.filter_start and loop.filter_end must be in [0, 1], got {self.filter_start!r}, {self.filter_end!r}")
         if int(self.critic_every) < 1:
             raise ValueError(f"loop.critic_every must be a positive integer, got {self.critic_every!r}")
 
@@ -185,6 +193,7 @@ class HRLLoop:
         ep = self.episodes
         obs, info = env.reset(seed=episode_seed(self.seed, ep) if seed is None else seed)
         achieved = np.asarray(info["subgoals"], dtype=bool)
+        visited = achieved.copy()                       # achieved at any step of the episode
         ret, length, options, success = 0.0, 0, 0, False
         chosen: list[str] = []
         sums: dict[str, float] = {}
@@ -236,6 +245,7 @@ class HRLLoop:
                     if reward > 0 and self.first_reward_step is None:
                         self.first_reward_step = self.env_steps
                 obs, achieved = next_obs, next_achieved
+                visited |= achieved
                 if terminated or truncated or achieved[g]:
                     break
             options += 1
@@ -256,6 +266,7 @@ class HRLLoop:
                         pooled, self._pending = TDBatch.cat(self._pending, cfg.critic_pool_weight), []
                         record(self.filter.update(pooled))
         if train:
+            self.filter.end_episode(visited, success)
             self.episodes += 1
             if self._break_cycles:
                 sums["low/revisits"], counts["low/revisits"] = float(revisits), 1

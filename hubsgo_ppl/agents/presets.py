@@ -9,14 +9,19 @@ __all__ = ["PRESETS", "TASK_PRESETS", "preset", "apply_overrides"]
 
 PRESETS: dict[str, dict[str, Any]] = {
     "minigrid": {
-        "steps": 15_000,                # FourRoom's measured budget; KeyDoor's is in TASK_PRESETS
+        # One default for every maze, shipped or written by a user (docs/results.md, "Critic evidence
+        # and defaults"); nothing maze-specific lives here.
+        "steps": 40_000,
         "low_level": "learned",
         "env": {},                      # keyword arguments of the env, e.g. max_steps
-        # filter_given_achieved: Ĝt given what the agent holds and has opened (docs/results.md, session 5)
+        # the high level reads Ĝt given what the agent holds and has opened, once per episode until
+        # that changes; the critic is updated on every 4th high-level minibatch (the pool at weight 1/4)
         "loop": {"option_steps": 10, "explore_fraction": 0.3, "low_explore_fraction": 0.3,
-                 "filter_fraction": 0.5, "filter_given_achieved": True},
+                 "filter_start": 0.5, "filter_end": 0.9, "filter_fraction": 0.3,
+                 "filter_given_achieved": True, "filter_refresh": "episode", "critic_every": 4},
         "high": {"hidden": [128, 128], "lr": 1e-3, "batch_size": 64},
-        "low": {"hidden": [128, 128], "lr": 5e-4, "batch_size": 128, "learning_starts": 1000},
+        # potential-based shaping towards each sub-goal's cell (optimal policies unchanged)
+        "low": {"hidden": [128, 128], "lr": 5e-4, "batch_size": 128, "learning_starts": 1000, "shaping": 1.0},
         # flat baselines (Stable-Baselines3 keyword arguments; agents/flat.py). dqn and ddqn share "dqn".
         "dqn": {"learning_rate": 5e-4, "buffer_size": 100_000, "learning_starts": 1000, "batch_size": 64,
                 "train_freq": 4, "target_update_interval": 1000, "exploration_fraction": 0.3,
@@ -47,22 +52,9 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
-_KEYDOOR: dict[str, Any] = {"steps": 40_000, "low": {"shaping": 1.0},
-                            "loop": {"critic_every": 8, "critic_pool_weight": "sum", "filter_refresh": "episode"}}
-
-# Per-task settings merged over the family's, as measured for the arm tasks (docs/results.md).
+# Per-task settings merged over the family's: the arm tasks' horizons and budgets (docs/results.md).
+# Mazes have none: every maze trains on the MiniGrid family default.
 TASK_PRESETS: dict[str, dict[str, Any]] = {
-    # KeyDoor (docs/results.md, session 2): at 15k steps exploration ends before most seeds first reach
-    # the goal. Low-level shaping (potential-based, towards each sub-goal's catalogue cell): without it
-    # the low level saw a key pick-up every ~3,000 random steps and some seeds first reached the goal
-    # after 17,000-28,000 steps. critic_every 8 pools eight minibatches per critic update to keep the
-    # critic's overhead near 1.15, at the summed likelihood of the 8 x 64 transitions (weight 1; every
-    # KeyDoor result since session 2 was measured so, docs/results.md, session 6). filter_refresh
-    # episode keeps a critic split between the two routes from switching routes mid-episode. On FourRoom
-    # the same three settings cost the critic its single-route G* and the corner result, so FourRoom
-    # keeps the family's defaults.
-    "keydoor": _KEYDOOR,
-    "keydoor_incorrect": _KEYDOOR,            # preset() deep-copies, so sharing the dict is safe
     "stack_cubes": {"steps": 20_000, "env": {"horizon": 400}, "loop": {"option_steps": 40}},
     "push_any_one": {"steps": 8_000, "env": {"horizon": 200}},
     "collect_three_balls": {"steps": 12_000, "env": {"horizon": 600}},

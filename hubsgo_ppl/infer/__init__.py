@@ -23,9 +23,9 @@ _EXPORTS = {
     "LIKELIHOODS": "likelihoods",
     "Likelihood": "likelihoods",
     "InferenceConfig": "critic",
-    "TDBatch": "critic",
+    "TDBatch": "tdbatch",
     "SubgoalCritic": "critic",
-    "CompiledTraceGraph_ELBO": "critic",
+    "CompiledTraceGraph_ELBO": "compiled_elbo",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -32,23 +32,25 @@ from __future__ import annotations
 
 import copy
 import math
-import warnings
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 import pyro
+import pyro.distributions as dist
 import torch
 from pyro.infer import TraceGraph_ELBO
 from pyro.ops.provenance import detach_provenance, get_provenance
 from torch.distributions import constraints
 
-from ..distributions._provenance import WithProvenance, retrack, untrack
+from ..distributions._provenance import WithProvenance, untrack
 from ..distributions.mrf import EXACT_LIMIT, PairwiseMRF
 from ..graph import SubgoalGraph
+from .compiled_elbo import CompiledTraceGraph_ELBO
 from .likelihoods import get_likelihood
 from .mh import KERNELS, ChromaticScan, mh_steps, run_chains
 from .priors import get_prior
+from .tdbatch import TDBatch, td_residuals
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..specs import ModelSpec
@@ -108,203 +110,6 @@ class InferenceConfig:
         if not isinstance(self.jit, bool):
             bad("jit", "must be true or false")
         self.burn_in, self.num_samples, self.exact_max_n = int(self.burn_in), int(self.num_samples), int(self.exact_max_n)
-
-
-@dataclass
-class TDBatch:
-    """One minibatch of B high-level transitions, for the set-conditioned TD target of Eq. 2.
-
-    ``q_taken``: Q(s_t, g_t) (B,); ``q_next``: Q(s_{t+k}, g') for every candidate g' (B, N);
-    ``reward``: the high-level reward (B,); ``discount``: gamma^k * (1 - done) (B,);
-    ``available`` (optional, bool (B, N)): the sub-goals selectable at s_{t+k} (e.g. not yet achieved);
-    the max of Eq. 2 runs over G(w) ∩ available. Tensors are detached on construction: the critic never
-    trains Q.
-    ``weight`` scales the batch's log-likelihood (Eq. 4) in the ELBO: :meth:`cat` pools K minibatches
-    into one update at weight 1/K, so the posterior an update aims at stays that of one minibatch.
-    """
-
-    q_taken: torch.Tensor
-    q_next: torch.Tensor
-    reward: torch.Tensor
-    discount: torch.Tensor
-    available: torch.Tensor | None = None
-    weight: float = 1.0
-
-    @classmethod
-    def cat(cls, batches: "list[TDBatch]", reduce: str = "mean") -> "TDBatch":
-        """Pool K minibatches into one batch whose likelihood counts as their ``"mean"`` (weight / K)
-        or their ``"sum"`` (every transition at its own weight)."""
-        if not batches:
-            raise ValueError("TDBatch.cat needs at least one batch")
-        if reduce not in ("mean", "sum"):
-            raise ValueError(f"TDBatch.cat: reduce must be 'mean' or 'sum', got {reduce!r}")
-        if len(batches) == 1:  # K = 1: the mean and the sum are the batch itself
-            return batches[0]
-        masks = [b.available for b in batches]
-        if any(m is None for m in masks) and not all(m is None for m in masks):
-            raise ValueError("TDBatch.cat: either every batch has an `available` mask or none has")
-        return cls(
-            q_taken=torch.cat([b.q_taken for b in batches]),
-            q_next=torch.cat([b.q_next for b in batches]),
-            reward=torch.cat([b.reward for b in batches]),
-            discount=torch.cat([b.discount for b in batches]),
-            available=None if masks[0] is None else torch.cat(masks),
-            weight=sum(b.weight for b in batches) / len(batches) ** (2 if reduce == "mean" else 1),
-        )
-
-    def __post_init__(self):
-        self.weight = float(self.weight)
-        if not (math.isfinite(self.weight) and self.weight > 0):
-            raise ValueError(f"TDBatch.weight must be a positive number, got {self.weight!r}")
-        if self.available is not None:
-            self.available = torch.as_tensor(self.available).detach().bool()
-        for f in fields(self):
-            if f.name in ("available", "weight"):
-                continue
-            v = getattr(self, f.name)
-            if not isinstance(v, torch.Tensor):
-                v = torch.as_tensor(v, dtype=torch.float32)
-            setattr(self, f.name, v.detach().to(torch.float32))
-        if self.q_next.dim() != 2:
-            raise ValueError(f"TDBatch.q_next must have shape (B, N), got {tuple(self.q_next.shape)}")
-        b = self.q_next.shape[0]
-        for name in ("q_taken", "reward", "discount"):
-            if getattr(self, name).shape != (b,):
-                raise ValueError(f"TDBatch.{name} must have shape ({b},) to match q_next (B={b}), got {tuple(getattr(self, name).shape)}")
-        if self.available is not None and self.available.shape != self.q_next.shape:
-            raise ValueError(f"TDBatch.available must have q_next's shape {tuple(self.q_next.shape)}, "
-                             f"got {tuple(self.available.shape)}")
-        for f in fields(self):
-            if f.name in ("available", "weight"):
-                continue
-            if not bool(torch.isfinite(getattr(self, f.name)).all()):
-                raise ValueError(f"TDBatch.{f.name} has NaN or inf entries; check the Q-network outputs/rewards")
-
-    @property
-    def n(self) -> int:
-        return self.q_next.shape[1]
-
-    def residuals(self, w: torch.Tensor) -> torch.Tensor:
-        """y_G(w) - Q(s, g) for each mask in ``w`` (..., N) -> (..., B) (Eq. 2).
-
-        y_G = r + discount * max_{g' in G(w)} Q(s', g'); an empty set bootstraps 0. Pure torch
-        masking, so the dependence on w stays visible to TraceGraph_ELBO.
-        """
-        if w.shape[-1] != self.n:
-            raise ValueError(f"masks have {w.shape[-1]} sub-goals but q_next has {self.n} columns")
-        return td_residuals(w, *self.tensors())
-
-    def tensors(self) -> tuple[torch.Tensor, ...]:
-        """``(q_taken, q_next, reward, discount[, available])``: the arguments of :func:`td_residuals`."""
-        out = (self.q_taken, self.q_next, self.reward, self.discount)
-        return out if self.available is None else out + (self.available,)
-
-
-def td_residuals(w, q_taken, q_next, reward, discount, available=None) -> torch.Tensor:
-    """:meth:`TDBatch.residuals` on the batch's tensors (the compiled update passes them as inputs)."""
-    # Provenance is moved from w to the result in one step (same dependency, far fewer tagged ops).
-    w, prov = untrack(w)
-    selected = w.unsqueeze(-2) > 0.5  # (..., 1, N)
-    if available is not None:
-        selected = selected & available  # (..., B, N)
-    best = torch.where(selected, q_next, -math.inf).amax(-1)  # (..., B)
-    bootstrap = torch.where(selected.any(-1), best, 0.0)
-    return retrack(reward + discount * bootstrap - q_taken, prov)
-
-
-class CompiledTraceGraph_ELBO(TraceGraph_ELBO):
-    """``TraceGraph_ELBO`` for one fixed model and guide, its loss and surrogate loss compiled with
-    ``torch.jit.trace`` (the idea of Pyro's ``JitTraceGraph_ELBO``; same estimator, far less Python per
-    step).
-
-    The compiled function is TraceGraph_ELBO's own ``_loss_and_surrogate_loss``, run in a param store
-    whose values are the trace's inputs. It differs from ``JitTraceGraph_ELBO`` in how it treats the
-    decaying-average baselines (``infer={"baseline": {"use_decaying_avg_baseline": True}}``) of
-    ``baseline_sites``. TraceGraph_ELBO updates such a baseline by writing it to the param store, a
-    Python side effect that a compiled trace does not replay, and the value it writes carries Pyro's
-    provenance wrapper, which a trace cannot take as an input. Here each baseline is an explicit input
-    (unwrapped) and output of the trace and is written back after every call, so it decays exactly as
-    in the eager estimator; compiling runs inside a scratch param store, so it moves nothing.
-
-    The first call runs eagerly (plain ``TraceGraph_ELBO``), which creates the baselines; later calls
-    compile once per parameter set, argument shapes and ``**kwargs`` (which must be hashable) and then
-    reuse the trace. Like ``JitTraceGraph_ELBO`` it needs a model whose structure does not change
-    between calls and tensor inputs passed as ``*args``.
-
-    ``extras``, if given, is called after the model and guide have run and returns tensors that they
-    computed (e.g. a statistic the guide stored on its owner); they become outputs of the trace, and
-    after every call :attr:`extra_values` holds their detached values.
-    """
-
-    def __init__(self, model: Callable, guide: Callable, baseline_sites: tuple[str, ...] = (),
-                 extras: Callable[[], tuple] | None = None, simplify: bool = True, **kwargs):
-        super().__init__(**kwargs)
-        self.model, self.guide, self.extras, self.simplify = model, guide, extras, simplify
-        self._baselines = tuple("__baseline_avg_downstream_cost_" + site for site in baseline_sites)
-        self._compiled: dict = {}
-        self.extra_values: tuple[torch.Tensor, ...] = ()
-
-    def _extras(self) -> tuple:
-        return tuple(detach_provenance(x) for x in self.extras()) if self.extras is not None else ()
-
-    def _compile(self, names: tuple[str, ...], constraints_: dict, inputs: tuple, args: tuple, kwargs: dict):
-        store, k = pyro.get_param_store(), len(names)
-
-        def run(*inputs_and_args):
-            scratch = {"params": dict(zip(names, inputs_and_args[:k])), "constraints": constraints_}
-            with store.scope(state=scratch):
-                elbo, surrogate_loss = self._loss_and_surrogate_loss(self.model, self.guide, inputs_and_args[k:], kwargs)
-            extras = self._extras()
-            return (elbo, surrogate_loss, *extras) + tuple(detach_provenance(scratch["params"][b]) for b in self._baselines)
-
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", torch.jit.TracerWarning)
-            # torch 2.13 marks torch.jit.trace deprecated (as it does for Pyro's own JitTraceGraph_ELBO);
-            # it works on the pinned torch, and `inference.jit: false` is the eager fallback
-            warnings.simplefilter("ignore", DeprecationWarning)
-            traced = torch.jit.trace(run, inputs + args, check_trace=False)
-        if self.simplify:  # fold what the trace recorded on constants, drop dead and repeated ops
-            for graph_pass in (torch._C._jit_pass_constant_propagation, torch._C._jit_pass_dce, torch._C._jit_pass_cse):
-                graph_pass(traced.graph)
-        return traced
-
-    def loss_and_grads(self, model, guide, *args, **kwargs) -> float:
-        """Pyro's ELBO interface, on the global param store (see :meth:`step`)."""
-        if model != self.model or guide != self.guide:
-            raise ValueError("CompiledTraceGraph_ELBO was built for another model and guide; build one per pair")
-        store = pyro.get_param_store()
-        state = store.get_state()
-        loss = self.step(state, *args, **kwargs)
-        store.set_state(state)
-        return loss
-
-    def step(self, state: dict, *args, **kwargs) -> float:
-        """``loss_and_grads`` on a param-store state ``{"params", "constraints"}`` (as from
-        ``ParamStoreDict.get_state()``, e.g. a model's private store), updated in place: gradients land
-        on its parameters and the new baselines in ``state["params"]``. Returns the loss (-ELBO)."""
-        params = state["params"]
-        if any(b not in params for b in self._baselines):
-            with pyro.get_param_store().scope(state=state):     # eager; creates the baselines
-                loss = super().loss_and_grads(self.model, self.guide, *args, **kwargs)
-            self.extra_values = tuple(x.detach() for x in self._extras())
-            return loss
-        names = tuple(params)
-        inputs = tuple(detach_provenance(params[n]) for n in names)
-        key = (names, tuple((tuple(a.shape), a.dtype) for a in args), tuple(sorted(kwargs.items())))
-        if key not in self._compiled:
-            cons = {n: state["constraints"][n] for n in names}
-            self._compiled[key] = self._compile(names, cons, inputs, args, kwargs)
-        # Run the (already simplified) trace as it is: the executor's profiling and optimisation runs
-        # cost ~0.2 s over the first calls and bought ~3% per call afterwards, a net loss over a
-        # 15,000-step FourRoom run (about 1,620 updates).
-        with torch.jit.optimized_execution(False):
-            elbo, surrogate_loss, *rest = self._compiled[key](*inputs, *args)
-        surrogate_loss.backward(retain_graph=self.retain_graph)
-        extras, baselines = rest[: len(rest) - len(self._baselines)], rest[len(rest) - len(self._baselines):]
-        self.extra_values = tuple(x.detach() for x in extras)
-        for name, value in zip(self._baselines, baselines):   # what TraceGraph_ELBO's param-store write does
-            params[name] = value.detach().contiguous().requires_grad_(True)
-        return -float(elbo.detach())
 
 
 def unique_rows(w: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -402,6 +207,9 @@ class SubgoalCritic:
 
     def _model(self, residual_fn: Callable[[torch.Tensor], torch.Tensor], weight: float = 1.0) -> None:
         w = pyro.sample("w", self._prior_dist)
+        if self.likelihood.evidence == "outcomes":      # residual_fn is the outcomes tensor (E, N)
+            self._observe_outcomes(w, residual_fn, weight)
+            return
         r = residual_fn(w)
         self._check_residuals(r, w)
         r, prov = untrack(r)
@@ -426,12 +234,22 @@ class SubgoalCritic:
         self._batch_site = (d, w)
         self._chains = detach_provenance(w).detach().clone()
 
+    def _observe_outcomes(self, w: torch.Tensor, outcomes: torch.Tensor, weight: float) -> None:
+        """The outcome evidence: ``log_likelihood(w, outcomes)`` as a factor that depends on w."""
+        plain, prov = untrack(w)
+        ll = self.likelihood.log_likelihood(plain, outcomes)
+        with pyro.poutine.scale(scale=weight):
+            pyro.sample("outcomes", WithProvenance(dist.Unit(ll), prov), obs=torch.zeros(ll.shape + (0,)))
+
     # The same model and guide for a TDBatch, with every tensor an argument (what torch.jit.trace needs)
     # and the guide's MH draw made before the call (our kernels use a torch.Generator, which a trace
     # cannot carry): the guide's site returns those draws, as the eager guide's sample() would.
 
     def _batch_model(self, draws, *tensors, weight: float = 1.0) -> None:
         w = pyro.sample("w", self._prior_dist)
+        if self.likelihood.evidence == "outcomes":
+            self._observe_outcomes(w, tensors[0], weight)
+            return
         r, prov = untrack(td_residuals(w, *tensors))
         lik = WithProvenance(self.likelihood.distribution(r).to_event(1), prov)
         with pyro.poutine.scale(scale=weight):
@@ -484,7 +302,15 @@ class SubgoalCritic:
         if isinstance(residual_fn, TDBatch):
             if residual_fn.n != self.n:
                 raise ValueError(f"TDBatch has {residual_fn.n} sub-goal columns but the critic has N = {self.n}")
+            if self.likelihood.evidence == "outcomes":
+                if residual_fn.outcomes is None or residual_fn.outcomes.shape[0] == 0:
+                    raise ValueError(f"the {self.likelihood.registered_name!r} likelihood scores outcomes, and "
+                                     "this TDBatch has none; attach the achieved sets of successful episodes")
+                return residual_fn.outcomes, residual_fn.weight
             return residual_fn.residuals, residual_fn.weight
+        if self.likelihood.evidence == "outcomes":
+            raise TypeError(f"the {self.likelihood.registered_name!r} likelihood scores outcomes: pass a TDBatch "
+                            "with `outcomes`, not a residual function")
         if not callable(residual_fn):
             raise TypeError(f"update() takes a TDBatch or a callable residual_fn, got {type(residual_fn).__name__}")
         return residual_fn, 1.0
@@ -497,7 +323,8 @@ class SubgoalCritic:
             self.config.pyro_validation == "first" and self.num_updates == 0)
         if self._compiled_elbo is not None and isinstance(residual_fn, TDBatch) and not validate:
             draws = self._draw()
-            loss = self._compiled_elbo.step(self._param_state, draws, *residual_fn.tensors(), weight=weight)
+            inputs = (fn,) if self.likelihood.evidence == "outcomes" else residual_fn.tensors()
+            loss = self._compiled_elbo.step(self._param_state, draws, *inputs, weight=weight)
             self._chains = draws
             self._step_stats = self._compiled_elbo.extra_values
         else:

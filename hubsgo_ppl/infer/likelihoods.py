@@ -4,10 +4,19 @@ A likelihood scores the residuals r = y_G(w) - Q(s, g) of a minibatch: ``distrib
 returns a distribution with batch shape ``r.shape`` that the critic's model observes at 0, i.e.
 log p(y | w) = sum_b log f(0 | r_b) = sum_b log f(r_b | 0) for the symmetric families here.
 
-``"gaussian"`` (default) is Eq. 4: log N(r; 0, scale^2) = -r^2 / (2 scale^2) + const, which for
-scale = 1 is -L_G of Eq. 2. ``"student_t"`` and ``"laplace"`` are heavier-tailed alternatives that
-keep a few huge early TD errors from dominating the critic. Register your own with
-``@register_likelihood("name")`` on a :class:`Likelihood` subclass.
+``"gaussian"`` is Eq. 4: log N(r; 0, scale^2) = -r^2 / (2 scale^2) + const, which for scale = 1
+is -L_G of Eq. 2. ``"student_t"`` and ``"laplace"`` are heavier-tailed alternatives that keep a few
+huge early TD errors from dominating the critic.
+
+``"outcome"`` scores other evidence (``evidence = "outcomes"``): the sets of sub-goals achieved on
+the agent's recent successful episodes (``TDBatch.outcomes``, (E, N)), read as noisy copies of one
+route w. Under Eq. 4 a sub-goal that is never the maximiser of Eq. 2 leaves the likelihood flat, so
+the TD evidence cannot tell a route from any superset of it; an outcome names the sub-goals a
+successful episode needed (docs/results.md, "Critic evidence and defaults").
+
+Register your own with ``@register_likelihood("name")`` on a :class:`Likelihood` subclass: a TD
+likelihood defines ``distribution(loc)``; an outcome likelihood sets ``evidence = "outcomes"`` and
+defines ``log_likelihood(w, outcomes)``.
 """
 
 from __future__ import annotations
@@ -22,7 +31,8 @@ from ._registry import build, make_register
 __all__ = ["Likelihood", "LIKELIHOODS", "register_likelihood", "get_likelihood"]
 
 LIKELIHOODS: dict[str, type] = {}
-register_likelihood = make_register(LIKELIHOODS, "likelihood", "distribution")
+register_likelihood = make_register(LIKELIHOODS, "likelihood", "log_likelihood")
+EVIDENCE = ("td", "outcomes")
 
 
 def get_likelihood(name: str, **params) -> "Likelihood":
@@ -41,12 +51,27 @@ def _positive(kind: str, key: str, value: float) -> float:
 
 
 class Likelihood:
-    """Base class: ``distribution(loc)`` with batch shape ``loc.shape``."""
+    """Base class. ``evidence`` says what the likelihood scores:
+
+    - ``"td"``: the TD residuals of Eq. 2; subclasses define ``distribution(loc)`` with batch shape
+      ``loc.shape``, observed at 0;
+    - ``"outcomes"``: the achieved sets of recent successful episodes; subclasses define
+      ``log_likelihood(w, outcomes)``.
+    """
 
     registered_name = "?"
+    evidence = "td"
 
     def distribution(self, loc: torch.Tensor):
-        raise NotImplementedError
+        raise NotImplementedError(f"{type(self).__name__} scores {self.evidence!r} evidence, not TD residuals")
+
+    def log_likelihood(self, w: torch.Tensor, *inputs: torch.Tensor) -> torch.Tensor:
+        """log p(evidence | w) for masks ``w`` (..., N) -> (...,). For TD likelihoods ``inputs`` are
+        :meth:`TDBatch.tensors`; the sum of ``distribution(r).log_prob(0)`` over the minibatch."""
+        from .tdbatch import td_residuals
+
+        r = td_residuals(w, *inputs)
+        return self.distribution(r).log_prob(torch.zeros(())).sum(-1)
 
     def params(self) -> dict[str, float]:
         return {}
@@ -93,3 +118,36 @@ class LaplaceLikelihood(Likelihood):
 
     def distribution(self, loc):
         return dist.Laplace(loc, self.scale)
+
+
+@register_likelihood("outcome")
+class OutcomeLikelihood(Likelihood):
+    """Evidence from outcomes: each recent successful episode's achieved set ``a_e`` (E, N) is a noisy
+    copy of one route, each indicator flipped with probability ``flip``; the route is one of them::
+
+        p(a_1..a_E | w) = 1/E sum_e prod_i flip^[a_ei != w_i] (1 - flip)^[a_ei == w_i]
+
+    A mixture over episodes, not a product: the posterior's mode is the most frequent successful set
+    (smoothed by ``flip``), so two routes seen equally often give two modes rather than their union,
+    and the evidence does not harden as episodes accumulate. Each sub-goal that ``w`` sets differently
+    from an episode costs ``log((1 - flip) / flip)`` nats (3.9 at the default 0.02).
+    """
+
+    evidence = "outcomes"
+
+    def __init__(self, flip: float = 0.02):
+        flip = _positive("outcome", "flip", flip)
+        if not flip < 0.5:
+            raise ValueError(f"outcome likelihood: flip must be < 0.5, got {flip!r}; e.g. flip: 0.02")
+        self.flip = flip
+
+    def params(self):
+        return {"flip": self.flip}
+
+    def log_likelihood(self, w: torch.Tensor, outcomes: torch.Tensor) -> torch.Tensor:
+        if outcomes.dim() != 2 or outcomes.shape[0] == 0 or outcomes.shape[1] != w.shape[-1]:
+            raise ValueError(f"outcomes must have shape (E >= 1, {w.shape[-1]}), got {tuple(outcomes.shape)}")
+        mismatch = (w.unsqueeze(-2) - outcomes).abs().sum(-1)                     # (..., E)
+        n = w.shape[-1]
+        per_episode = mismatch * math.log(self.flip) + (n - mismatch) * math.log1p(-self.flip)
+        return torch.logsumexp(per_episode, -1) - math.log(outcomes.shape[0])

@@ -297,3 +297,62 @@ def test_init_prior_refuses_a_prior_the_guide_cannot_hold():
         SubgoalCritic(KEYDOOR, prior="beta_bernoulli", config=InferenceConfig(init="prior"))
     with pytest.raises(ValueError, match="InferenceConfig.init"):
         InferenceConfig(init="zeros")
+
+
+def outcome_batch(n, seed, episodes=5):
+    """A TD batch carrying the achieved sets of ``episodes`` successful episodes (random 0/1 rows)."""
+    batch = td_batch(n, seed)
+    g = torch.Generator().manual_seed(seed + 100)
+    batch.outcomes = torch.randint(0, 2, (episodes, n), generator=g).float()
+    return batch
+
+
+@pytest.mark.parametrize(
+    "prior, prior_params, exact_max_n, jit",
+    [
+        ("ising", {"strength": 1.0, "field": -0.5}, 16, True),
+        ("beta_bernoulli", {"alpha": 1.0, "beta": 3.0}, 16, False),
+        ("bernoulli", {"p": 0.3}, 2, True),   # N = 4 > 2: leave-one-out score path
+    ],
+)
+def test_outcome_likelihood_gradient_matches_exact_enumeration(prior, prior_params, exact_max_n, jit):
+    batch = outcome_batch(4, seed=2)
+    cfg = InferenceConfig(exact_max_n=exact_max_n, jit=jit)
+    critic = SubgoalCritic(KEYDOOR, prior, prior_params, "outcome", {"flip": 0.2}, config=cfg, seed=3)
+    set_params(critic, seed=7)
+    s = state_table(critic.n)
+    sd = critic.state_dict()
+    theta = sd["theta"].clone().requires_grad_(True)
+    coupling = sd["coupling"].clone().requires_grad_(True)
+    lq = PairwiseMRF(theta, coupling, critic.graph.edge_index).log_prob(s)
+    loglik = critic.likelihood.log_likelihood(s, batch.outcomes)
+    loss = (lq.exp() * (-loglik - critic.prior.distribution().log_prob(s) + lq)).sum()
+    exact = torch.cat(torch.autograd.grad(loss, [theta, coupling]))
+    est = mean_gradient(critic, batch, k=150)
+    rel = float((est - exact).norm() / exact.norm())
+    assert rel < GRAD_TOL, (rel, est, exact)
+
+
+def test_outcome_critic_learns_the_most_frequent_successful_set():
+    """Seven episodes took route {a1, b1}, three took {a2, b2}: the posterior's mode is the first route,
+    not the union of both (which a product of per-episode likelihoods would tend to)."""
+    routes = torch.tensor([[1.0, 1.0, 0.0, 0.0]] * 7 + [[0.0, 0.0, 1.0, 1.0]] * 3)
+    batch = td_batch(4, seed=0)
+    batch.outcomes = routes
+    critic = SubgoalCritic(KEYDOOR, "bernoulli", {}, "outcome", {}, config=InferenceConfig(lr=0.1), seed=0)
+    for _ in range(300):
+        critic.update(batch)
+    top = critic.ranking(num_samples=2000, top_k=2)
+    assert top[0]["subgoals"] == ["a1", "b1"]
+    # exact posterior: p(w | O) ∝ p(w) * mean_e flip^d (1-flip)^(N-d); its top two states, and q near it
+    s = state_table(4)
+    post = get_likelihood("outcome").log_likelihood(s, routes).softmax(0)
+    assert abs(top[0]["exact_prob"] - float(post.max())) < 0.1
+
+
+def test_outcome_likelihood_refuses_batches_without_outcomes():
+    critic = SubgoalCritic(KEYDOOR, likelihood="outcome", seed=0)
+    with pytest.raises(ValueError, match="scores outcomes"):
+        critic.update(td_batch(4, seed=0))
+    with pytest.raises(TypeError, match="scores outcomes"):
+        critic.update(keydoor_residuals)

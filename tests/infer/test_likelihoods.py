@@ -35,7 +35,7 @@ def test_student_t_and_laplace_values():
         ("gaussian", {"scale": -1}, "scale must be > 0"),
         ("student_t", {"df": -3}, "df must be > 0"),
         ("laplace", {"sigma": 1}, "unknown parameter.*accepted: scale"),
-        ("cauchy", {}, "registered: gaussian, laplace, student_t"),
+        ("cauchy", {}, "registered: gaussian, laplace, outcome, student_t"),
     ],
 )
 def test_bad_likelihoods(name, params, match):
@@ -54,3 +54,30 @@ def test_user_registered_likelihood():
         assert get_likelihood("wide_gaussian_test").distribution(R).batch_shape == (5,)
     finally:
         LIKELIHOODS.pop("wide_gaussian_test")
+
+
+def test_outcome_likelihood_is_a_mixture_over_episodes():
+    lik = get_likelihood("outcome", flip=0.1)
+    outcomes = torch.tensor([[1.0, 1.0, 0.0], [0.0, 1.0, 1.0]])
+    w = torch.tensor([[1.0, 1.0, 0.0], [0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])
+    # by hand: mismatches per episode (0, 2), (2, 2), (1, 1)
+    def per(d):
+        return d * math.log(0.1) + (3 - d) * math.log(0.9)
+    expected = [math.log(0.5 * (math.exp(per(a)) + math.exp(per(b)))) for a, b in ((0, 2), (2, 2), (1, 1))]
+    assert torch.allclose(lik.log_likelihood(w, outcomes), torch.tensor(expected), atol=1e-6)
+    assert lik.evidence == "outcomes" and lik.params() == {"flip": 0.1}
+    with pytest.raises(ValueError, match="flip must be < 0.5"):
+        get_likelihood("outcome", flip=0.7)
+    with pytest.raises(ValueError, match="outcomes must have shape"):
+        lik.log_likelihood(w, torch.zeros(0, 3))
+
+
+def test_td_likelihood_log_likelihood_sums_the_residual_densities():
+    from hubsgo_ppl.infer.tdbatch import TDBatch
+
+    batch = TDBatch(q_taken=torch.zeros(2), q_next=torch.tensor([[1.0, 2.0], [0.5, -1.0]]),
+                    reward=torch.tensor([0.0, 1.0]), discount=torch.ones(2))
+    w = torch.tensor([[1.0, 0.0], [0.0, 1.0]])
+    lik = get_likelihood("gaussian", scale=0.5)
+    expected = lik.distribution(batch.residuals(w)).log_prob(torch.zeros(())).sum(-1)
+    assert torch.allclose(lik.log_likelihood(w, *batch.tensors()), expected)
