@@ -82,7 +82,7 @@ from typing import Literal  # noqa: E402
 from pydantic import ConfigDict as _ConfigDict  # noqa: E402
 from pydantic import Field, field_validator, model_validator  # noqa: E402
 
-__all__ += ["ComponentSpec", "InferenceSpec", "ModelSpec", "load_model_spec", "list_model_specs"]
+__all__ += ["ComponentSpec", "InferenceSpec", "ModelSpec", "load_model_spec", "list_model_specs", "match_subgoals"]
 
 EdgeSign = Literal["positive", "negative", "unknown"]
 
@@ -175,6 +175,25 @@ class ModelSpec(StrictModel):
 
         get_prior(self.prior.name, SubgoalGraph(self.subgoals), **self.prior.params())
         return self
+
+
+def match_subgoals(spec: ModelSpec, names: list[str], source: str) -> ModelSpec:
+    """``spec`` with its sub-goals in the task catalogue's order ``names``, matched by name (a spec may
+    list them in any order; edges name their ends, so they need no change). A spec whose names are not
+    the catalogue's is refused with the missing and the extra names."""
+    missing = [n for n in names if n not in spec.subgoals]
+    extra = [n for n in spec.subgoals if n not in names]
+    if missing or extra:
+        parts = []
+        if missing:
+            parts.append(f"missing {', '.join(missing)}")
+        if extra:
+            parts.append(f"not in the task: {', '.join(extra)}")
+        raise SpecError(f"{source}: subgoals: {'; '.join(parts)}; list exactly the task's sub-goals "
+                        f"(any order): {', '.join(names)}")
+    if list(spec.subgoals) == list(names):
+        return spec
+    return spec.model_copy(update={"subgoals": list(names)})
 
 
 def list_model_specs() -> list[str]:

@@ -23,7 +23,7 @@ from ...specs import SpecError
 from ..subgoals import Catalogue
 from .layout import MazeSpec, MazeState, load_maze_spec
 
-__all__ = ["plan", "optimal_steps", "optimal_return", "transition", "holds"]
+__all__ = ["plan", "optimal_steps", "optimal_return", "transition", "holds", "shortest_path_cells"]
 
 _DIR_VEC = ((1, 0), (0, 1), (-1, 0), (0, -1))
 MAX_STATES = 2_000_000
@@ -214,3 +214,39 @@ def optimal_return(source: Any, start_dir: int | None = None) -> float:
         n = None if path is None else taken + len(path)
         values.append(0.0 if n is None or n > spec.max_steps else 1.0 - 0.9 * n / spec.max_steps)
     return float(sum(values) / len(values))
+
+
+def shortest_path_cells(source: Any, slack: int = 0) -> set[tuple[int, int]]:
+    """The cells the agent occupies on some plan from the start to the goal of at most ``optimum +
+    slack`` steps, over every start direction: a cell outside it is off every (near-)shortest path."""
+    spec, starts, _ = _resolve(source, None)
+    m = _Maze(spec)
+    terminal = m.lava | {m.goal}
+    dist: dict[MazeState, int] = {s: 0 for s in starts}
+    back: dict[MazeState, list[MazeState]] = {}
+    frontier = deque(starts)
+    while frontier:
+        s = frontier.popleft()
+        if s.pos in terminal:
+            continue
+        for name in m.actions:
+            t = transition(m, s, name)
+            back.setdefault(t, []).append(s)
+            if t not in dist:
+                dist[t] = dist[s] + 1
+                frontier.append(t)
+        if len(dist) > MAX_STATES:
+            raise RuntimeError(f"{spec.source}: BFS visited over {MAX_STATES} states; the maze is too large")
+    goals = [s for s in dist if s.pos == m.goal]
+    if not goals:
+        raise ValueError(f"{spec.source}: the goal is unreachable")
+    optimum = min(dist[s] for s in goals)
+    to_goal: dict[MazeState, int] = {s: 0 for s in goals}
+    frontier = deque(goals)
+    while frontier:
+        t = frontier.popleft()
+        for s in back.get(t, ()):
+            if s not in to_goal:
+                to_goal[s] = to_goal[t] + 1
+                frontier.append(s)
+    return {s.pos for s, d in dist.items() if s in to_goal and d + to_goal[s] <= optimum + slack}
