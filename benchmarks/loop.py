@@ -1,4 +1,4 @@
-"""Env steps/s of the full HUBS-GO loop next to h-DQN and the raw env (issue 3 benchmark).
+"""Env steps/s of the full HUBS-GO loop next to h-DQN and the raw env (the critic's loop overhead).
 
 Measured side by side in one process with the same seed and budget, on one torch thread:
 

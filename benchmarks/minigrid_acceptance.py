@@ -1,7 +1,9 @@
-"""Issue 3's acceptance figures from a sweep of sweeps/minigrid_acceptance.yaml.
+"""The MiniGrid acceptance figures (docs/results.md, "MiniGrid acceptance") from a sweep folder that
+holds the runs of sweeps/keydoor_acceptance.yaml and sweeps/minigrid_acceptance.yaml:
 
-    .venv/bin/hubsgo sweep sweeps/minigrid_acceptance.yaml --workers 2 --out runs/sweeps/main
-    .venv/bin/python benchmarks/minigrid_acceptance.py runs/sweeps/main --episodes 10
+    .venv/bin/hubsgo sweep sweeps/keydoor_acceptance.yaml --workers 2 --out runs/sweeps/acceptance
+    .venv/bin/hubsgo sweep sweeps/minigrid_acceptance.yaml --workers 2 --out runs/sweeps/acceptance
+    .venv/bin/python benchmarks/minigrid_acceptance.py runs/sweeps/acceptance --episodes 10
 
 For each task and variant it prints, over seeds (mean ± s.e.): the greedy evaluation return (and its
 fraction of the BFS-optimal return), the mean episodic return over training, the wall time; for HUBS-GO

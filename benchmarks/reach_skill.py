@@ -1,12 +1,12 @@
 """Reach skill of the learned low level (GoalTD3 + HER) on a robosuite arm task.
 
-Issue 4: "with the learned low level, a benchmark shows the reach skill reaching at least 0.9 success
-within a stated budget". Each episode draws a random target region in the arm's workspace above the
-table (a sphere of radius ``tolerance`` around a point; gripper command +-1 at random) and gives the
-policy ``--episode-steps`` control steps to bring the end effector into it with the gripper command
-applied. Training uses GoalTD3 exactly as the HRL loop does (``act`` / ``observe`` / ``begin_option``);
-every ``--eval-every`` training steps, greedy success over ``--eval-episodes`` fixed held-out targets is
-measured, and training stops once it reaches ``--target``.
+Acceptance: with the learned low level, the reach skill reaches at least 0.9 greedy success within a
+stated budget (``--budget``; ``--target`` sets the bar). Each episode draws a random target region in
+the arm's workspace above the table (a sphere of radius ``tolerance`` around a point; gripper command
++-1 at random) and gives the policy ``--episode-steps`` control steps to bring the end effector into
+it with the gripper command applied. Training uses GoalTD3 exactly as the HRL loop does (``act`` /
+``observe`` / ``begin_option``); every ``--eval-every`` training steps, greedy success over
+``--eval-episodes`` fixed held-out targets is measured, and training stops once it reaches ``--target``.
 
     .venv/bin/python benchmarks/reach_skill.py --task stack_cubes --budget 6000 --seed 0
 

@@ -12,7 +12,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOK_DIR = ROOT / "notebooks"
 NOTEBOOKS = sorted(NOTEBOOK_DIR.glob("*.ipynb"))
-EXPECTED = {"01-critic-explained", "02-keydoor-walkthrough", "03-robustness"}  # issue 6
+EXPECTED = {"01-critic-explained", "02-keydoor-walkthrough", "03-robustness"}  # notebooks/README.md
 
 
 def _load(path: Path) -> dict:

@@ -1,9 +1,15 @@
-"""Builds an agent by name. Hierarchical agents differ only in their filter (and low level):
+"""Builds an agent by name. The two hierarchical agents share the HRL loop and differ only in
+their filter (and low level):
 
 - ``hubsgo``: the HRL loop + :class:`CriticFilter` around a :class:`SubgoalCritic` built from a model spec;
 - ``hdqn``:   the same loop and sub-goals with :class:`NoFilter` (no critic).
 
-Flat baselines and HIRO register their builders in :data:`BUILDERS` from their own modules.
+:data:`BUILDERS` is a fixed table in this module, mapping each agent name to its builder. The two
+hierarchical agents map to :func:`build_hierarchical`. The flat baselines (``ddqn``, ``dqn``, ``ppo``,
+``td3``) and HIRO (which has its own loop, :mod:`hubsgo_ppl.agents.hiro`) map to a
+``"module:function"`` string that :func:`build_agent` imports on first use, so their dependencies
+(SB3, ...) load only when that agent is built. Their modules do not register anything themselves; a
+new agent is added by adding an entry here.
 """
 
 from __future__ import annotations
@@ -73,8 +79,8 @@ def build_hierarchical(agent: str, env: gym.Env, cfg: dict[str, Any], seed: int,
     return HRLLoop(env, high, low, filt, loop_cfg, seed)
 
 
-# name -> builder(env, cfg, seed, critic=None). Strings are imported on first use, so a baseline's
-# dependencies load only when that baseline runs.
+# name -> builder(env, cfg, seed, critic=None), or "module:function" naming one. Strings are imported
+# by build_agent on first use, so a baseline's dependencies load only when that baseline is built.
 BUILDERS: dict[str, Callable[..., Any] | str] = {
     "hubsgo": lambda env, cfg, seed, critic=None: build_hierarchical("hubsgo", env, cfg, seed, critic),
     "hdqn": lambda env, cfg, seed, critic=None: build_hierarchical("hdqn", env, cfg, seed, critic),

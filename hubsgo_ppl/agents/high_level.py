@@ -1,8 +1,23 @@
 """The high level: a DQN Q(s, g; θ) over the candidate sub-goals (Sec. 3.2).
 
-Its TD target takes the max over an allowed set, Eq. 2:
-``y = r + γ^k max_{g' ∈ M} Q(s', g'; θ⁻)`` with M = (Ĝt for HUBS-GO, G0 for h-DQN) ∩ not-yet-achieved.
-The same minibatch, as a :class:`~hubsgo_ppl.infer.critic.TDBatch`, feeds the critic's update (Algorithm 1, lines 9-11).
+Its TD target bootstraps over an allowed set, Eq. 2:
+``y = r + γ^k Q(s', g'; θ⁻)`` over g' ∈ M, with M = (Ĝt for HUBS-GO, G0 for h-DQN) ∩ not-yet-achieved.
+The same minibatch, as a :class:`~hubsgo_ppl.infer.tdbatch.TDBatch`, goes to the filter, and so to the
+critic's update (Algorithm 1, lines 9-11).
+
+The high level's target and the critic's TD residuals share the minibatch but not the bootstrap, on
+purpose:
+
+- The high level (:meth:`HighLevelDQN.update`) trains on a double-Q target (``double_q``, the default):
+  g' is the online network's argmax over M, valued by the target network, which reduces the max
+  operator's overestimation. When Ĝt ∩ not-yet-achieved is empty, M falls back to G0 ∩
+  not-yet-achieved, so the high level's own learning never stalls on an empty filtered set.
+- A TD likelihood of the critic (Eq. 4; :meth:`TDBatch.residuals`, i.e.
+  :func:`~hubsgo_ppl.infer.tdbatch.td_residuals`) scores candidate *sets* G(w):
+  ``y_G(w) = r + γ^k max_{g' ∈ G(w) ∩ available} Q(s', g'; θ⁻)``, a plain max of the target network,
+  and an empty set bootstraps 0. A set must be judged by the value it allows, and a set that allows
+  nothing is worth 0; falling back to G0 there would give the empty set the value of the whole
+  catalogue.
 """
 
 from __future__ import annotations
@@ -42,7 +57,9 @@ def masked_max(values: torch.Tensor, mask: torch.Tensor, empty: float = 0.0) -> 
 
 
 # The high-level minibatch handed to the filter is the critic's own TDBatch (Eq. 2, with the
-# not-yet-achieved mask as ``available``), so the residuals are computed in one place.
+# not-yet-achieved mask as ``available``): the critic's set-conditioned residuals are computed only in
+# TDBatch.residuals / td_residuals. The high level's own double-Q target (update below) is a different
+# quantity; the module docstring says why.
 HighLevelBatch = TDBatch
 
 

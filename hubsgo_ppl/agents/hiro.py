@@ -310,7 +310,12 @@ class GoalTD3Low:
 
 
 class HIRO:
-    """Two-level HIRO on the trainer protocol of ``experiments.run`` (one training episode per chunk)."""
+    """Two-level HIRO on the trainer protocol of ``experiments.run`` (one training episode per chunk).
+
+    HIRO runs its own training loop, not :class:`~hubsgo_ppl.agents.loop.HRLLoop`: its high level emits
+    continuous goals every ``c`` steps instead of choosing from a sub-goal catalogue, so it has no
+    options that end on a sub-goal predicate and no filter. It reuses only the loop's
+    :class:`EpisodeStats` and :func:`episode_seed`."""
 
     def __init__(self, env: gym.Env, cfg: HIROConfig, seed: int):
         self.env, self.cfg, self.seed = env, cfg, int(seed)

@@ -1,6 +1,7 @@
 """Scripted low level for the robosuite arm tasks: track the sub-goal's target with OSC.
 
-The fast option for CPU runs and tests (issue 4, low level (b)): no learning, pure numpy. Each call
+The default low level of the arm tasks, and the fast option for CPU runs and tests (the learned one
+is :class:`~hubsgo_ppl.agents.td3_her.GoalTD3`): no learning, pure numpy. Each call
 reads the chosen sub-goal's target ``(xyz, gripper)`` from the env (``docs/design.md``) and returns a
 proportional OSC_POSITION command towards ``xyz`` with the target's gripper command. Routing
 (lift, cross, descend) and gripper timing live in the env's targets, which are re-evaluated on the

@@ -1,10 +1,12 @@
 """The learned low level of the arm tasks: goal-conditioned TD3 with hindsight experience replay.
 
-Issue 4, low level (a). The high level picks a sub-goal g; the task turns it into a target region
-``env.unwrapped.subgoal_target(g) = (xyz, gripper)`` (a waypoint re-evaluated on every step, so routing
-— lift, cross, descend — stays in the task). This policy learns to bring the end effector there and
-to drive the gripper to the commanded value. Its goal input is the target *relative to the end
-effector* (plus the gripper command), so one policy serves every sub-goal of every task.
+One of the two low levels of the arm tasks (the other is the scripted
+:class:`~hubsgo_ppl.agents.scripted_osc.ScriptedOSC`). The high level picks a sub-goal g; the task
+turns it into a target region ``env.unwrapped.subgoal_target(g) = (xyz, gripper)`` (a waypoint
+re-evaluated on every step, so routing — lift, cross, descend — stays in the task). This policy learns
+to bring the end effector there and to drive the gripper to the commanded value. Its goal input is the
+target *relative to the end effector* (plus the gripper command), so one policy serves every sub-goal
+of every task.
 
 References:
     Fujimoto, van Hoof, Meger (2018). Addressing Function Approximation Error in Actor-Critic Methods
@@ -141,7 +143,7 @@ class _RunningNorm:
 
 
 class GoalTD3:
-    """Goal-conditioned TD3 + HER: the learned low level of the robosuite tasks (issue 4).
+    """Goal-conditioned TD3 + HER: the learned low level of the robosuite tasks.
 
     The loop's low-level protocol: ``act`` (called with the env, from which it reads the sub-goal's
     current target), ``observe`` (stores the transition; trains), ``begin_option`` (a new trajectory
