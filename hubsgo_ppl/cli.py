@@ -21,6 +21,9 @@ from typing import Any, Sequence
 
 __all__ = ["main", "build_parser"]
 
+#: optional modules -> the extra of hubsgo-ppl that installs them
+EXTRAS = {"robosuite": "robosuite", "mujoco": "robosuite", "ray": "ray"}
+
 
 def _fmt_ranking(table: dict[str, Any]) -> str:
     lines = [f"G* from {table['num_samples']:,} critic samples (most probable sub-goal sets):",
@@ -205,6 +208,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (SpecError, RunError, CheckpointError, UnknownTaskError, FloatingPointError) as exc:
         msg = str(exc).strip().replace("\n", "; ")
         print(f"hubsgo: error: {msg}", file=sys.stderr)
+        return 2
+    except ModuleNotFoundError as exc:
+        module = (exc.name or "").split(".")[0]
+        if module not in EXTRAS:
+            raise               # not an optional extra: a broken install or a bug, keep the traceback
+        what = " ".join(str(a) for a in (args.command, getattr(args, "task", None)) if a)
+        print(f"hubsgo: error: `hubsgo {what}` needs {module}, which is not installed; install the "
+              f'{EXTRAS[module]} extra: pip install "hubsgo-ppl[{EXTRAS[module]}]"', file=sys.stderr)
         return 2
 
 

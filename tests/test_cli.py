@@ -42,7 +42,7 @@ def test_train_subgoals_evaluate_round_trip(tmp_path, capsys):
 
 @pytest.mark.parametrize("argv, needle", [
     (["train", "nope"], "unknown task 'nope'"),
-    (["train", "keydoor", "--model", "fourroom-specific"], "use a spec written for this task"),
+    (["train", "keydoor", "--model", "fourroom-specific"], "model spec 'fourroom-specific'"),
     (["train", "keydoor", "--model", "no-such-spec"], "no-such-spec"),
     (["evaluate", "/nonexistent/run"], "no such run directory"),
     (["subgoals", "/nonexistent/run"], "no such run directory"),

@@ -7,8 +7,11 @@ with one row per dump (``metrics.csv``: one row per episode) and TensorBoard eve
 from __future__ import annotations
 
 import csv
+import io
 from pathlib import Path
 from typing import Any, Protocol
+
+from .io import write_text
 
 __all__ = ["Logger", "CSVOutput", "TensorBoardOutput", "read_csv_rows"]
 
@@ -20,7 +23,7 @@ class Output(Protocol):
 
 
 class CSVOutput:
-    """Appends rows; new keys after the first row are added by rewriting the header (rare)."""
+    """Appends rows; new keys after the first row are added by rewriting the file atomically (rare)."""
 
     def __init__(self, path: str | Path):
         self.path = Path(path)
@@ -34,10 +37,11 @@ class CSVOutput:
         if new:
             rows = read_csv_rows(self.path) if self.fields else []
             self.fields += new
-            with self.path.open("w", newline="") as fh:
-                w = csv.DictWriter(fh, fieldnames=self.fields)
-                w.writeheader()
-                w.writerows(rows)
+            buf = io.StringIO(newline="")
+            w = csv.DictWriter(buf, fieldnames=self.fields)
+            w.writeheader()
+            w.writerows(rows)
+            write_text(self.path, buf.getvalue())    # a kill mid-rewrite must not lose the earlier rows
         with self.path.open("a", newline="") as fh:
             csv.DictWriter(fh, fieldnames=self.fields).writerow(values)
 
@@ -46,10 +50,13 @@ class CSVOutput:
 
 
 class TensorBoardOutput:
-    def __init__(self, log_dir: str | Path):
+    """Scalars to TensorBoard. ``purge_step`` (on resume): TensorBoard hides events logged at or after
+    that step by an earlier, interrupted writer, so a resumed run shows each step once."""
+
+    def __init__(self, log_dir: str | Path, purge_step: int | None = None):
         from torch.utils.tensorboard import SummaryWriter
 
-        self.writer = SummaryWriter(log_dir=str(log_dir))
+        self.writer = SummaryWriter(log_dir=str(log_dir), purge_step=purge_step)
 
     def write(self, values: dict[str, Any], step: int) -> None:
         for k, v in values.items():
@@ -75,8 +82,15 @@ class Logger:
         self.values = {}
 
     def close(self) -> None:
+        """Close every output, even if one of them fails (the first failure is raised afterwards)."""
+        error: BaseException | None = None
         for out in self.outputs:
-            out.close()
+            try:
+                out.close()
+            except Exception as exc:  # noqa: BLE001 - re-raised below, after the others are closed
+                error = error or exc
+        if error is not None:
+            raise error
 
 
 def read_csv_rows(path: str | Path) -> list[dict[str, str]]:

@@ -14,11 +14,13 @@ Run directory::
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import math
-import os
 import platform
+import sys
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
@@ -30,8 +32,8 @@ from ..agents.factory import HIERARCHICAL, build_agent
 from ..agents.loop import episode_seed
 from ..agents.presets import apply_overrides, preset
 from ..envs import get_task, make, register
-from ..specs import SpecError
-from .io import CheckpointError, load_checkpoint, save_torch, write_json, write_text, write_yaml
+from .io import (CheckpointError, is_temp_file, load_checkpoint, save_torch, truncate_csv, write_json,
+                 write_yaml)
 from .logger import CSVOutput, Logger, TensorBoardOutput, read_csv_rows
 from .plots import plot_learning_curve
 
@@ -39,6 +41,10 @@ __all__ = ["RunConfig", "RunError", "train", "evaluate", "load_run", "subgoal_ta
 
 CHECKPOINT = "checkpoint.pt"
 FORMAT = 1
+#: what ``train`` writes into a run directory besides the checkpoint (``tb`` is a folder)
+RUN_FILES = ("config.yaml", "metrics.csv", "critic_history.csv", "tb", "learning_curve.png", "subgoals.json")
+#: per-episode logs, cut back to the checkpoint on resume
+EPISODE_LOGS = ("metrics.csv", "critic_history.csv")
 
 
 class RunError(RuntimeError):
@@ -68,6 +74,87 @@ def _critic_from_config(resolved: dict[str, Any]) -> Any:
     return SubgoalCritic.from_spec(spec, seed=int(np.random.SeedSequence([resolved["seed"], 4]).generate_state(1)[0]))
 
 
+def _section_settings(agent: str, family: str, low_level: str) -> dict[str, dict[str, Any]]:
+    """``{section: {key: default}}`` for the ``--set`` sections the agent reads (others it ignores)."""
+    import inspect
+
+    def of(cls: Any) -> dict[str, Any]:
+        if dataclasses.is_dataclass(cls):
+            return {f.name: float(f.default) if str(f.type) == "float" and isinstance(f.default, int) else f.default
+                    for f in dataclasses.fields(cls) if f.name != "total_steps"}
+        params = inspect.signature(cls.__init__).parameters.values()
+        return {p.name: p.default for p in params if p.name != "self" and p.kind is p.POSITIONAL_OR_KEYWORD}
+
+    if agent in HIERARCHICAL:
+        from ..agents.high_level import HighLevelConfig
+        from ..agents.loop import LoopConfig
+
+        if low_level == "scripted":
+            from ..agents.scripted_osc import ScriptedOSC as low
+        elif family == "minigrid":
+            from ..agents.low_level import GoalDQNConfig as low
+        else:
+            from ..agents.td3_her import GoalTD3Config as low
+        return {"loop": of(LoopConfig), "high": of(HighLevelConfig), "low": of(low)}
+    if agent == "hiro":
+        from ..agents.hiro import HIROConfig
+
+        return {"hiro": of(HIROConfig)}
+    return {}
+
+
+def _fit(default: Any, value: Any) -> tuple[Any, str | None]:
+    """``(value, None)`` if ``value`` fits a setting whose default is ``default`` (a number written
+    as ``3e-4``, which YAML reads as text, becomes a number), else ``(value, expected kind)``."""
+    if isinstance(default, bool):
+        return value, None if isinstance(value, bool) else "true or false"
+    if isinstance(default, (int, float)) and isinstance(value, str):
+        with contextlib.suppress(ValueError):
+            number = float(value)
+            value = int(number) if isinstance(default, int) and number.is_integer() else number
+    if isinstance(default, int):
+        return value, None if isinstance(value, int) and not isinstance(value, bool) else "an integer"
+    if isinstance(default, float):
+        return value, None if isinstance(value, (int, float)) and not isinstance(value, bool) else "a number"
+    if isinstance(default, str):
+        return value, None if isinstance(value, str) else "a string"
+    if isinstance(default, tuple):
+        return value, None if isinstance(value, (list, tuple)) else "a list, e.g. [64, 64]"
+    return value, None
+
+
+def check_overrides(base: dict[str, Any], hyper: dict[str, Any], overrides: list[str], agent: str,
+                    family: str) -> None:
+    """Refuse a ``--set`` key the run would not use, naming the section and its valid keys, and a value
+    of the wrong kind. ``base``: the settings before the overrides; ``hyper``: after (numbers fixed)."""
+    sections = sorted(k for k, v in base.items() if isinstance(v, dict))
+    plain = sorted(k for k, v in base.items() if not isinstance(v, dict))
+    known = _section_settings(agent, family, str(hyper.get("low_level", "learned")))
+    for item in overrides:
+        key, _, text = item.partition("=")
+        parts = key.strip().split(".")
+        if len(parts) == 1:
+            if parts[0] in sections:
+                raise RunError(f"--set {item}: {parts[0]!r} is a section; set one of its keys, e.g. "
+                               f"{parts[0]}.{next(iter(known.get(parts[0], {'KEY': 0})))}=VALUE")
+            if parts[0] not in plain:
+                raise RunError(f"--set {item}: unknown setting {parts[0]!r}; settings: {', '.join(plain)}; "
+                               f"sections: {', '.join(sections)}")
+            valid, section, name = base, None, parts[0]
+        elif len(parts) == 2 and parts[0] in known:
+            section, name = parts
+            valid = known[section]
+            if name not in valid:
+                raise RunError(f"--set {item}: unknown key {name!r} in section {section!r} (agent {agent}); "
+                               f"valid keys: {', '.join(sorted(valid))}")
+        else:
+            continue            # a nested or an env/baseline setting: checked where it is used
+        value, want = _fit(valid[name], apply_overrides({"v": None}, [f"v={text}"])["v"])
+        if want is not None:
+            raise RunError(f"--set {item}: {key.strip()} takes {want} (default {valid[name]!r}), got {value!r}")
+        (hyper if section is None else hyper[section])[name] = value
+
+
 def resolve(cfg: RunConfig) -> dict[str, Any]:
     """Everything a run needs, as plain data (written to config.yaml and into checkpoints)."""
     info = get_task(cfg.task)
@@ -79,9 +166,10 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
     if cfg.low_level is not None:
         hyper["low_level"] = cfg.low_level
     try:
-        hyper = apply_overrides(hyper, cfg.overrides)
+        base, hyper = hyper, apply_overrides(hyper, cfg.overrides)
     except ValueError as exc:
         raise RunError(str(exc)) from None
+    check_overrides(base, hyper, cfg.overrides, cfg.agent, info.family)
     resolved: dict[str, Any] = {
         "task": info.name, "task_ref": str(cfg.task), "family": info.family,
         "agent": cfg.agent, "seed": int(cfg.seed), "hyper": hyper,
@@ -90,14 +178,11 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
     }
     names = info.catalogue.names
     if cfg.agent == "hubsgo" or cfg.model is not None:
-        from ..specs import load_model_spec
+        from ..specs import load_model_spec, match_subgoals
 
         spec = load_model_spec(cfg.model or f"{info.name}-specific", graph=cfg.graph)
-        if list(spec.subgoals) != names:
-            raise SpecError(
-                f"model spec {cfg.model or info.name + '-specific'!r} lists sub-goals {list(spec.subgoals)} "
-                f"but task {info.name!r} has {names}; use a spec written for this task "
-                f"(e.g. {info.name}-specific) or make its `subgoals` match the catalogue")
+        spec = match_subgoals(spec, list(names), f"model spec {cfg.model or info.name + '-specific'!r} "
+                                                 f"for task {info.name!r}")
         resolved["model_spec"] = spec.model_dump(mode="json")
         resolved["model"] = spec.name
     return resolved
@@ -106,8 +191,12 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
 def _build(resolved: dict[str, Any]):
     register()
     env = make(resolved["task_ref"], **resolved["hyper"].get("env", {}))   # built-in name or catalogue path
-    critic = _critic_from_config(resolved) if resolved["agent"] == "hubsgo" else None
-    agent = build_agent(resolved["agent"], env, resolved["hyper"], resolved["seed"], critic=critic)
+    try:
+        critic = _critic_from_config(resolved) if resolved["agent"] == "hubsgo" else None
+        agent = build_agent(resolved["agent"], env, resolved["hyper"], resolved["seed"], critic=critic)
+    except BaseException:
+        env.close()
+        raise
     return env, agent
 
 
@@ -121,20 +210,26 @@ def _check_writable(out: Path) -> None:
         raise RunError(f"--out {out}: cannot write there ({exc.strerror}); choose a writable folder") from None
 
 
-def _truncate_metrics(path: Path, episodes: int) -> None:
-    """Drop rows logged after the checkpoint (episode >= episodes), atomically; keeps everything else."""
-    rows = read_csv_rows(path)
-    keep = [r for r in rows if int(float(r["episode"])) < episodes]
-    if len(keep) == len(rows):
-        return
-    import csv
-    import io
-
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=list(rows[0].keys()))
-    w.writeheader()
-    w.writerows(keep)
-    write_text(path, buf.getvalue())
+def _tidy(out: Path, names: tuple[str, ...]) -> list[str]:
+    """Remove ``names`` (files, or folders of TensorBoard events) from ``out`` and temporary files left
+    by interrupted atomic writes of them or of the checkpoint; returns the names removed."""
+    removed = []
+    for name in names:
+        path = out / name
+        if path.is_dir():
+            for event in path.glob("events.out.tfevents.*"):
+                event.unlink()
+            with contextlib.suppress(OSError):
+                path.rmdir()            # only if nothing else is in there
+        elif path.exists():
+            path.unlink()
+        else:
+            continue
+        removed.append(name)
+    for path in out.iterdir() if out.is_dir() else ():
+        if any(is_temp_file(path, target) for target in (*RUN_FILES, CHECKPOINT)) and path.is_file():
+            path.unlink()
+    return removed
 
 
 def _log_episode(logger: Logger, stats: Any, wall: float) -> None:
@@ -154,20 +249,34 @@ def _save(out: Path, resolved: dict[str, Any], agent: Any, wall: float) -> None:
                                    "episodes": agent.episodes, "env_steps": agent.env_steps, "wall_time": wall})
 
 
+def _restore(path: Path, ckpt: dict[str, Any], steps: int | None = None):
+    """(env, agent) built from a checkpoint's config with the agent's state loaded; ``steps``: a new budget."""
+    resolved = ckpt["config"]
+    if steps is not None:
+        resolved["hyper"]["steps"] = int(steps)
+    env, agent = _build(resolved)
+    try:
+        agent.load_state_dict(ckpt["agent"])
+    except (KeyError, RuntimeError, ValueError) as exc:
+        env.close()
+        raise CheckpointError(f"{path}: does not match its own config ({exc}); "
+                              "the checkpoint is damaged; start a new run") from None
+    except BaseException:
+        env.close()
+        raise
+    if steps is not None and hasattr(agent, "cfg") and hasattr(agent.cfg, "total_steps"):
+        agent.cfg.total_steps = int(steps)
+    return env, agent
+
+
 def load_run(run_dir: str | Path):
     """(resolved config, env, agent, checkpoint) of a run directory, agent restored from its checkpoint."""
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise RunError(f"{run_dir}: no such run directory; pass the --out folder of `hubsgo train`")
     ckpt = load_checkpoint(run_dir / CHECKPOINT)
-    resolved = ckpt["config"]
-    env, agent = _build(resolved)
-    try:
-        agent.load_state_dict(ckpt["agent"])
-    except (KeyError, RuntimeError, ValueError) as exc:
-        raise CheckpointError(f"{run_dir / CHECKPOINT}: does not match its own config ({exc}); "
-                              "the checkpoint is damaged; start a new run") from None
-    return resolved, env, agent, ckpt
+    env, agent = _restore(run_dir / CHECKPOINT, ckpt)
+    return ckpt["config"], env, agent, ckpt
 
 
 def subgoal_table(critic: Any, names: list[str], num_samples: int = 10_000, top_k: int = 5) -> dict[str, Any]:
@@ -179,95 +288,112 @@ def subgoal_table(critic: Any, names: list[str], num_samples: int = 10_000, top_
                         "pairwise": {f"{u}--{v}": j for (u, v), j in critic.factors()["pairwise"].items()}}}
 
 
+def _start(cfg: RunConfig, out: Path, resume: bool):
+    """(resolved config, env, agent, wall time so far, TensorBoard purge step) of a new or resumed run.
+
+    Resuming cuts the per-episode logs back to the checkpoint. A run that stopped before its first
+    checkpoint has nothing to resume: its partial files are removed and it starts afresh."""
+    ckpt_path = out / CHECKPOINT
+    started = any((out / name).exists() for name in RUN_FILES)
+    if resume and (ckpt_path.exists() or not started):
+        ckpt = load_checkpoint(ckpt_path)
+        _check_writable(out)
+        env, agent = _restore(ckpt_path, ckpt, cfg.steps)
+        _tidy(out, ())
+        for name in EPISODE_LOGS:
+            truncate_csv(out / name, "episode", agent.episodes)
+        # TensorBoard hides the interrupted writer's events after the checkpoint's last episode
+        return ckpt["config"], env, agent, float(ckpt.get("wall_time", 0.0)), agent.env_steps + 1
+    if ckpt_path.exists():
+        raise RunError(f"{out} already holds a run; continue it with --resume or choose another --out")
+    resolved = resolve(cfg)
+    _check_writable(out)
+    removed = _tidy(out, RUN_FILES)
+    if removed:
+        print(f"hubsgo: {out} has no checkpoint (its run stopped before the first one); removed its partial "
+              f"files ({', '.join(removed)}) and started the run afresh", file=sys.stderr)
+    try:
+        env, agent = _build(resolved)
+    except (TypeError, ValueError) as exc:
+        if not cfg.overrides:
+            raise
+        msg = " ".join(str(exc).split())
+        raise RunError(f"the run cannot be built with --set {' --set '.join(cfg.overrides)}: {msg}") from None
+    try:
+        write_yaml(out / "config.yaml", resolved)
+    except BaseException:
+        env.close()
+        raise
+    return resolved, env, agent, 0.0, None
+
+
 def train(cfg: RunConfig, out: str | Path, resume: bool = False, progress: bool = True,
           max_episodes: int | None = None, on_episode: Callable[[Any], None] | None = None) -> dict[str, Any]:
-    """Train (or resume) a run into ``out``. ``max_episodes`` stops early (used to test interruption)."""
+    """Train (or resume) a run into ``out``. ``max_episodes`` stops early (used to test interruption).
+    Whatever happens, the env, the progress bar and the log files are closed on return."""
     out = Path(out)
-    ckpt_path = out / CHECKPOINT
-    if resume:
-        ckpt = load_checkpoint(ckpt_path)
-        resolved = ckpt["config"]
-        if cfg.steps is not None:
-            resolved["hyper"]["steps"] = int(cfg.steps)
-        _check_writable(out)
-        env, agent = _build(resolved)
-        agent.load_state_dict(ckpt["agent"])
-        if hasattr(agent, "cfg") and hasattr(agent.cfg, "total_steps"):
-            agent.cfg.total_steps = int(resolved["hyper"]["steps"])
-        _truncate_metrics(out / "metrics.csv", agent.episodes)
-        wall0 = float(ckpt.get("wall_time", 0.0))
-    else:
-        if ckpt_path.exists():
-            raise RunError(f"{out} already holds a run; continue it with --resume or choose another --out")
-        resolved = resolve(cfg)
-        _check_writable(out)
-        env, agent = _build(resolved)
-        write_yaml(out / "config.yaml", resolved)
-        wall0 = 0.0
-    torch.set_num_threads(int(resolved.get("threads", 1)))
-    total = int(resolved["hyper"]["steps"])
-    names = list(env.unwrapped.subgoal_names)
-    logger = Logger([CSVOutput(out / "metrics.csv"), TensorBoardOutput(out / "tb")])
-    history = CSVOutput(out / "critic_history.csv")
-    has_critic = hasattr(agent, "filter") and hasattr(agent.filter, "critic")
+    resolved, env, agent, wall0, purge = _start(cfg, out, resume)
+    with contextlib.ExitStack() as closing:
+        closing.callback(env.close)
+        torch.set_num_threads(int(resolved.get("threads", 1)))
+        total = int(resolved["hyper"]["steps"])
+        names = list(env.unwrapped.subgoal_names)
+        logger = Logger([CSVOutput(out / "metrics.csv")])
+        closing.callback(logger.close)
+        logger.outputs.append(TensorBoardOutput(out / "tb", purge_step=purge))
+        history = CSVOutput(out / "critic_history.csv")
+        has_critic = hasattr(agent, "filter") and hasattr(agent.filter, "critic")
 
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
+        bar = None
+        if progress:
+            from tqdm.auto import tqdm
 
-        bar = tqdm(total=total, initial=min(agent.env_steps, total), unit="step", dynamic_ncols=True,
-                   desc=f"{resolved['agent']}/{resolved['task']}/s{resolved['seed']}")
-    recent: list[tuple[float, float]] = []
-    last_ckpt = agent.episodes // int(resolved["checkpoint_every"])
-    t0 = time.perf_counter()
-    episodes_this_call = 0
-    try:
-        while agent.env_steps < total and (max_episodes is None or episodes_this_call < max_episodes):
-            before = agent.env_steps
-            for stats in agent.train_chunk():
-                episodes_this_call += 1
-                wall = wall0 + time.perf_counter() - t0
-                _log_episode(logger, stats, wall)
-                recent = (recent + [(stats.ret, float(stats.success))])[-20:]
-                if has_critic and stats.episode % int(resolved["history_every"]) == 0:
-                    marg = agent.filter.marginals()
-                    history.write({"episode": stats.episode, "env_steps": stats.env_steps,
-                                   **{n: round(float(m), 5) for n, m in zip(names, marg)}}, stats.env_steps)
-                if on_episode is not None:
-                    on_episode(stats)
-            if agent.episodes // int(resolved["checkpoint_every"]) > last_ckpt:   # crossed a multiple
-                last_ckpt = agent.episodes // int(resolved["checkpoint_every"])
-                _save(out, resolved, agent, wall0 + time.perf_counter() - t0)
-            if bar is not None and recent:
-                bar.update(min(agent.env_steps, total) - min(before, total))
-                post = {"ret": f"{np.mean([r for r, _ in recent]):.2f}",
-                        "succ": f"{np.mean([s for _, s in recent]):.2f}",
-                        "eps": f"{stats.filter_eps:.2f}"}
-                if "critic/loss" in stats.scalars:
-                    post["critic"] = f"{stats.scalars['critic/loss']:.3g}"
-                bar.set_postfix(post, refresh=False)
-    except KeyboardInterrupt:
-        if bar is not None:
-            bar.close()
-        logger.close()
-        raise RunError(f"interrupted; {out / CHECKPOINT} holds the last checkpoint; "
-                       f"continue with `hubsgo train {resolved['task']} --out {out} --resume`") from None
-    finally:
-        if bar is not None:
-            bar.close()
-    logger.close()
-    wall = wall0 + time.perf_counter() - t0
-    _save(out, resolved, agent, wall)
-    rows = read_csv_rows(out / "metrics.csv")
-    if rows:
-        plot_learning_curve([float(r["env_steps"]) for r in rows], [float(r["return"]) for r in rows],
-                            [float(r["success"]) for r in rows], out / "learning_curve.png",
-                            title=f"{resolved['agent']} on {resolved['task']} (seed {resolved['seed']})")
-    summary: dict[str, Any] = {"run_dir": str(out), "episodes": agent.episodes, "env_steps": agent.env_steps,
-                               "wall_time": round(wall, 2), "finished": agent.env_steps >= total}
-    if has_critic and agent.env_steps >= total:
-        write_json(out / "subgoals.json", subgoal_table(agent.filter.critic, names))
-    env.close()
+            bar = tqdm(total=total, initial=min(agent.env_steps, total), unit="step", dynamic_ncols=True,
+                       desc=f"{resolved['agent']}/{resolved['task']}/s{resolved['seed']}")
+            closing.callback(bar.close)
+        recent: list[tuple[float, float]] = []
+        last_ckpt = agent.episodes // int(resolved["checkpoint_every"])
+        t0 = time.perf_counter()
+        episodes_this_call = 0
+        try:
+            while agent.env_steps < total and (max_episodes is None or episodes_this_call < max_episodes):
+                before = agent.env_steps
+                for stats in agent.train_chunk():
+                    episodes_this_call += 1
+                    wall = wall0 + time.perf_counter() - t0
+                    _log_episode(logger, stats, wall)
+                    recent = (recent + [(stats.ret, float(stats.success))])[-20:]
+                    if has_critic and stats.episode % int(resolved["history_every"]) == 0:
+                        marg = agent.filter.marginals()
+                        history.write({"episode": stats.episode, "env_steps": stats.env_steps,
+                                       **{n: round(float(m), 5) for n, m in zip(names, marg)}}, stats.env_steps)
+                    if on_episode is not None:
+                        on_episode(stats)
+                if agent.episodes // int(resolved["checkpoint_every"]) > last_ckpt:   # crossed a multiple
+                    last_ckpt = agent.episodes // int(resolved["checkpoint_every"])
+                    _save(out, resolved, agent, wall0 + time.perf_counter() - t0)
+                if bar is not None and recent:
+                    bar.update(min(agent.env_steps, total) - min(before, total))
+                    post = {"ret": f"{np.mean([r for r, _ in recent]):.2f}",
+                            "succ": f"{np.mean([s for _, s in recent]):.2f}",
+                            "eps": f"{stats.filter_eps:.2f}"}
+                    if "critic/loss" in stats.scalars:
+                        post["critic"] = f"{stats.scalars['critic/loss']:.3g}"
+                    bar.set_postfix(post, refresh=False)
+        except KeyboardInterrupt:
+            raise RunError(f"interrupted; {out / CHECKPOINT} holds the last checkpoint; "
+                           f"continue with `hubsgo train {resolved['task']} --out {out} --resume`") from None
+        wall = wall0 + time.perf_counter() - t0
+        _save(out, resolved, agent, wall)
+        rows = read_csv_rows(out / "metrics.csv")
+        if rows:
+            plot_learning_curve([float(r["env_steps"]) for r in rows], [float(r["return"]) for r in rows],
+                                [float(r["success"]) for r in rows], out / "learning_curve.png",
+                                title=f"{resolved['agent']} on {resolved['task']} (seed {resolved['seed']})")
+        summary: dict[str, Any] = {"run_dir": str(out), "episodes": agent.episodes, "env_steps": agent.env_steps,
+                                   "wall_time": round(wall, 2), "finished": agent.env_steps >= total}
+        if has_critic and agent.env_steps >= total:
+            write_json(out / "subgoals.json", subgoal_table(agent.filter.critic, names))
     return summary
 
 
@@ -277,18 +403,19 @@ def evaluate(run_dir: str | Path, episodes: int = 10, seed: int | None = None) -
         raise RunError(f"--episodes must be positive, got {episodes}")
     run_dir = Path(run_dir)
     resolved, env, agent, _ = load_run(run_dir)
-    base = int(resolved["seed"]) + 1_000_003 if seed is None else int(seed)
-    rets, succ, lengths, optimal = [], [], [], []
-    if resolved["family"] == "minigrid":
-        from ..envs.minigrid.bfs import optimal_return
-    for i in range(episodes):
-        if resolved["family"] == "minigrid":      # BFS from this episode's start state
-            env.reset(seed=episode_seed(base, i))
-            optimal.append(float(optimal_return(env)))
-        stats = agent.run_episode(train=False, seed=episode_seed(base, i))
-        rets.append(stats.ret)
-        succ.append(float(stats.success))
-        lengths.append(stats.length)
+    with contextlib.closing(env):
+        base = int(resolved["seed"]) + 1_000_003 if seed is None else int(seed)
+        rets, succ, lengths, optimal = [], [], [], []
+        if resolved["family"] == "minigrid":
+            from ..envs.minigrid.bfs import optimal_return
+        for i in range(episodes):
+            if resolved["family"] == "minigrid":      # BFS from this episode's start state
+                env.reset(seed=episode_seed(base, i))
+                optimal.append(float(optimal_return(env)))
+            stats = agent.run_episode(train=False, seed=episode_seed(base, i))
+            rets.append(stats.ret)
+            succ.append(float(stats.success))
+            lengths.append(stats.length)
     n = len(rets)
     result = {"task": resolved["task"], "agent": resolved["agent"], "episodes": n,
               "mean_return": float(np.mean(rets)),
@@ -300,5 +427,4 @@ def evaluate(run_dir: str | Path, episodes: int = 10, seed: int | None = None) -
         result["optimal_return"] = opt
         result["fraction_of_optimal"] = result["mean_return"] / opt if opt > 0 else float("nan")
     write_json(run_dir / "eval.json", result)
-    env.close()
     return result

@@ -38,8 +38,8 @@ from pydantic import Field, field_validator, model_validator
 
 from ..resources import sweeps_dir
 from ..specs import SpecError, StrictModel, load_yaml, validate_spec
-from .io import write_yaml
-from .run import CHECKPOINT, RunConfig
+from .io import CheckpointError, load_checkpoint, write_yaml
+from .run import CHECKPOINT, RunConfig, RunError
 
 __all__ = ["SweepSpec", "TaskEntry", "Variant", "Job", "load_sweep", "plan", "run_sweep", "run_status",
            "KILL_ENV"]
@@ -189,11 +189,9 @@ def run_status(job: Job) -> str:
     ckpt = Path(job.out) / CHECKPOINT
     if not ckpt.is_file():
         return "new"
-    import torch
-
     try:
-        steps = int(torch.load(ckpt, map_location="cpu", weights_only=False, mmap=True)["env_steps"])
-    except Exception:   # a damaged checkpoint: the run starts again (train() reports if it cannot)
+        steps = int(load_checkpoint(ckpt, mmap=True)["env_steps"])
+    except (CheckpointError, KeyError, TypeError, ValueError):   # damaged: train() reports it on resume
         return "partial"
     return "finished" if steps >= job.budget else "partial"
 
@@ -273,7 +271,7 @@ def _ray(jobs: list[Job], workers: int, done: Any) -> None:
     try:
         import ray
     except ImportError:
-        raise RuntimeError("the ray backend needs Ray: pip install 'hubsgo-ppl[ray]', or use --backend local") \
+        raise RunError('the ray backend needs Ray: pip install "hubsgo-ppl[ray]", or use --backend local') \
             from None
     started = not ray.is_initialized()
     if started:

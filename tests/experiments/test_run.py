@@ -1,10 +1,22 @@
 """The run harness: determinism, resume after interruption, outputs, and bad input."""
 
+import dataclasses
 import json
+import math
+import os
+import signal
+import stat
+import subprocess
+import sys
+import time
 
+import numpy as np
 import pytest
+import torch
+import yaml
 
-from hubsgo_ppl.experiments.io import CheckpointError
+from hubsgo_ppl.cli import main
+from hubsgo_ppl.experiments.io import CheckpointError, load_checkpoint
 from hubsgo_ppl.experiments.logger import read_csv_rows
 from hubsgo_ppl.experiments.run import RunConfig, RunError, evaluate, train
 
@@ -73,7 +85,7 @@ def test_bad_inputs_fail_clearly_and_lose_nothing(tmp_path):
 
     with pytest.raises(UnknownTaskError, match="unknown task 'nope'"):
         train(RunConfig(task="nope"), tmp_path / "x", progress=False)
-    with pytest.raises(SpecError, match="use a spec written for this task"):
+    with pytest.raises(SpecError, match="model spec 'fourroom-specific'.*'keydoor'"):
         train(RunConfig(task="keydoor", model="fourroom-specific"), tmp_path / "y", progress=False)
     with pytest.raises(CheckpointError, match="no checkpoint"):
         train(_cfg(), tmp_path / "empty", resume=True, progress=False)
@@ -91,3 +103,199 @@ def test_bad_inputs_fail_clearly_and_lose_nothing(tmp_path):
     blocker.write_text("x")                     # a folder cannot be made under a file, even as root
     with pytest.raises(RunError, match="cannot write there"):
         train(_cfg(steps=300), blocker / "sub", progress=False)
+
+
+# -- kill -9 and --resume: every file of the run directory as in an uninterrupted run --------------------
+
+KILL_CHILD = """
+import json, os, sys, time
+from pathlib import Path
+from hubsgo_ppl.experiments.run import RunConfig, train
+
+out, marker, stop_at = Path(sys.argv[1]), Path(sys.argv[2]), int(sys.argv[4])
+
+def hold(stats):
+    if stats.episode == stop_at:      # logged after a checkpoint: wait here for the parent's kill -9
+        marker.write_text(str(os.getpid()))
+        time.sleep(600)
+
+train(RunConfig(**json.loads(sys.argv[3])), out, progress=False, on_episode=hold)
+"""
+
+
+def _same(a, b, where="checkpoint"):
+    """Deep equality of checkpoint contents (tensors, arrays, NaN-aware floats); fails naming the key."""
+    assert type(a) is type(b), where
+    if isinstance(a, dict):
+        assert list(a) == list(b), where
+        for k in a:
+            _same(a[k], b[k], f"{where}.{k}")
+    elif isinstance(a, (list, tuple)):
+        assert len(a) == len(b), where
+        for i, (x, y) in enumerate(zip(a, b)):
+            _same(x, y, f"{where}[{i}]")
+    elif isinstance(a, torch.Tensor):
+        assert a.dtype == b.dtype and torch.equal(a, b), where
+    elif isinstance(a, np.ndarray):
+        assert a.dtype == b.dtype and np.array_equal(a, b, equal_nan=a.dtype.kind == "f"), where
+    elif isinstance(a, float) and math.isnan(a):
+        assert math.isnan(b), where
+    else:
+        assert a == b, where
+
+
+def _no_wall(row):
+    return {k: v for k, v in row.items() if "wall" not in k}
+
+
+def _files(run):
+    return sorted(str(p.relative_to(run)) for p in run.rglob("*") if p.is_file() and p.parent.name != "tb")
+
+
+def assert_same_run(got, want):
+    """Every file of run ``got`` matches run ``want`` (TensorBoard events excepted; wall times ignored)."""
+    assert _files(got) == _files(want)
+    assert list((got / "tb").glob("events.out.tfevents.*")) and list((want / "tb").glob("events.out.tfevents.*"))
+    for name in _files(want):
+        a, b = got / name, want / name
+        if name.endswith(".csv"):
+            rows_a, rows_b = read_csv_rows(a), read_csv_rows(b)
+            assert list(rows_a[0]) == list(rows_b[0]), name                     # same columns, same order
+            assert [_no_wall(r) for r in rows_a] == [_no_wall(r) for r in rows_b], name
+        elif name.endswith((".yaml", ".yml")):
+            assert yaml.safe_load(a.read_text()) == yaml.safe_load(b.read_text()), name
+        elif name.endswith(".json"):
+            assert json.loads(a.read_text()) == json.loads(b.read_text()), name
+        elif name == "checkpoint.pt":
+            ca, cb = load_checkpoint(a), load_checkpoint(b)
+            ca.pop("wall_time"), cb.pop("wall_time")
+            _same(ca, cb)
+        else:
+            assert a.read_bytes() == b.read_bytes(), name
+
+
+def test_kill_9_then_resume_leaves_every_file_as_an_uninterrupted_run(tmp_path, capsys):
+    cfg = _cfg(steps=900, history_every=1)
+    full = tmp_path / "full"
+    train(cfg, full, progress=False)
+    n = len(_rows(full))
+    assert n >= 6, "the budget must span episodes after the kill for this test to mean anything"
+
+    run, marker = tmp_path / "killed", tmp_path / "held"
+    proc = subprocess.Popen([sys.executable, "-c", KILL_CHILD, str(run), str(marker),
+                             json.dumps(dataclasses.asdict(cfg)), "3"], stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 120
+    while not marker.exists():
+        assert proc.poll() is None, proc.stderr.read().decode()[-2000:]
+        assert time.monotonic() < deadline, "the child never reached episode 3"
+        time.sleep(0.05)
+    proc.kill()                                          # SIGKILL: no handler, no finally, no flush
+    assert proc.wait(timeout=60) == -signal.SIGKILL
+    proc.stderr.close()
+    assert load_checkpoint(run / "checkpoint.pt")["episodes"] == 2
+    assert [r["episode"] for r in _rows(run)] == ["0", "1", "2", "3"]        # rows the checkpoint lacks
+    assert [r["episode"] for r in read_csv_rows(run / "critic_history.csv")] == ["0", "1", "2", "3"]
+    assert not (run / "subgoals.json").exists()
+
+    capsys.readouterr()
+    assert main(["train", "keydoor", "--out", str(run), "--resume", "--no-progress"]) == 0
+    assert capsys.readouterr().err == ""
+    assert_same_run(run, full)
+    assert len(_rows(run)) == n
+
+
+def test_run_files_honour_the_umask(tmp_path):
+    old = os.umask(0o022)
+    try:
+        run = tmp_path / "run"
+        train(_cfg(steps=300), run, progress=False)
+        evaluate(run, episodes=1)
+    finally:
+        os.umask(old)
+    files = [p for p in run.rglob("*") if p.is_file()]
+    names = {p.name for p in files}
+    assert {"checkpoint.pt", "config.yaml", "metrics.csv", "critic_history.csv", "subgoals.json",
+            "learning_curve.png", "eval.json"} <= names
+    assert any(n.startswith("events.out.tfevents") for n in names)
+    assert {p.name: oct(stat.S_IMODE(p.stat().st_mode)) for p in files} == {p.name: "0o644" for p in files}
+
+
+def test_resume_before_the_first_checkpoint_starts_afresh(tmp_path, capsys):
+    cfg = _cfg(steps=600)
+    cfg.checkpoint_every = 1000
+    fresh = tmp_path / "fresh"
+    train(cfg, fresh, progress=False)
+
+    def crash(stats):
+        if stats.episode == 1:
+            raise Crash
+
+    run = tmp_path / "run"
+    with pytest.raises(Crash):
+        train(cfg, run, progress=False, on_episode=crash)
+    assert not (run / "checkpoint.pt").exists()
+    assert (run / "config.yaml").is_file() and len(_rows(run)) == 2
+    (run / "notes.txt").write_text("not the run's")
+    capsys.readouterr()
+    train(cfg, run, resume=True, progress=False)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no checkpoint" in err[0] and "afresh" in err[0], err
+    assert "metrics.csv" in err[0] and "config.yaml" in err[0]
+    assert (run / "notes.txt").read_text() == "not the run's"
+    (run / "notes.txt").unlink()
+    assert len(list((run / "tb").glob("events.out.tfevents.*"))) == 1        # the partial events went too
+    assert_same_run(run, fresh)
+
+
+@pytest.mark.parametrize("error", [RuntimeError, KeyboardInterrupt, FloatingPointError])
+def test_an_exception_closes_the_writer_and_the_env(tmp_path, monkeypatch, error):
+    import hubsgo_ppl.experiments.run as run_mod
+    from hubsgo_ppl.experiments.logger import TensorBoardOutput
+
+    seen = {"env_closed": 0, "writers": []}
+
+    class SpyTB(TensorBoardOutput):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            seen["writers"].append(self.writer)
+
+    real_build = run_mod._build
+
+    def build(resolved):
+        env, agent = real_build(resolved)
+        real_close, real_chunk = env.close, agent.train_chunk
+
+        def close():
+            seen["env_closed"] += 1
+            real_close()
+
+        def chunk():
+            yield from real_chunk()
+            raise error("the trainer failed")
+
+        env.close, agent.train_chunk = close, chunk
+        return env, agent
+
+    monkeypatch.setattr(run_mod, "TensorBoardOutput", SpyTB)
+    monkeypatch.setattr(run_mod, "_build", build)
+    expected = RunError if error is KeyboardInterrupt else error
+    with pytest.raises(expected):
+        train(_cfg(steps=300), tmp_path / "run", progress=True)
+    assert len(seen["writers"]) == 1 and seen["writers"][0].all_writers is None, "TensorBoard writer left open"
+    assert seen["env_closed"] == 1
+    assert len(_rows(tmp_path / "run")) == 1
+
+
+def test_set_numbers_in_e_notation_and_bad_keys():
+    from hubsgo_ppl.experiments.run import resolve
+
+    hyper = resolve(RunConfig(task="keydoor", overrides=["high.lr=3e-4", "low.buffer_size=1e5",
+                                                         "loop.option_steps=12"]))["hyper"]
+    assert hyper["high"]["lr"] == 3e-4 and isinstance(hyper["high"]["lr"], float)
+    assert hyper["low"]["buffer_size"] == 100_000 and isinstance(hyper["low"]["buffer_size"], int)
+    assert hyper["loop"]["option_steps"] == 12
+    with pytest.raises(RunError, match=r"unknown key 'nonsense' in section 'loop'.*valid keys: .*option_steps"):
+        resolve(RunConfig(task="keydoor", overrides=["loop.nonsense=3"]))
+    with pytest.raises(RunError, match=r"unknown key 'learning_rate' in section 'hiro'.*valid keys: .*temperature"):
+        resolve(RunConfig(task="keydoor", agent="hiro", overrides=["hiro.learning_rate=1e-3"]))
+    assert resolve(RunConfig(task="keydoor", agent="hiro", overrides=["hiro.lr=1e-3"]))["hyper"]["hiro"]["lr"] == 1e-3
