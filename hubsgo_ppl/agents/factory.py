@@ -71,7 +71,7 @@ def build_hierarchical(agent: str, env: gym.Env, cfg: dict[str, Any], seed: int,
     if agent == "hubsgo":
         if critic is None:
             raise ValueError("the hubsgo agent needs a critic (built from a model spec)")
-        filt = CriticFilter(critic)
+        filt = CriticFilter(critic, loop_cfg.outcome_window, loop_cfg.filter_keep)
     elif agent == "hdqn":
         filt = NoFilter()
     else:
