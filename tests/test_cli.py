@@ -1,10 +1,12 @@
 """The `hubsgo` command line: verbs work end to end; bad input gives one clear line and exit code 2."""
 
+import csv
 import shutil
 import subprocess
 import sys
 
 import pytest
+import yaml
 
 from hubsgo_ppl.cli import main
 
@@ -67,3 +69,74 @@ def test_console_script_is_installed():
     exe = shutil.which("hubsgo") or str(__import__("pathlib").Path(sys.executable).parent / "hubsgo")
     res = subprocess.run([exe, "--help"], capture_output=True, text=True, timeout=120)
     assert res.returncode == 0 and "train" in res.stdout
+
+
+@pytest.mark.parametrize("setting, needles", [
+    ("loop.nonsense=3", ["unknown key 'nonsense' in section 'loop'", "valid keys:", "option_steps"]),
+    ("high.lrr=0.1", ["unknown key 'lrr' in section 'high'", "batch_size", "lr"]),
+    ("low.total_steps=5", ["unknown key 'total_steps' in section 'low'", "learning_starts"]),
+    ("loop.option_steps=many", ["loop.option_steps takes an integer", "'many'"]),
+    ("high.double_q=maybe", ["high.double_q takes true or false"]),
+    ("nonsense=3", ["unknown setting 'nonsense'", "sections:", "loop"]),
+    ("loop=3", ["'loop' is a section"]),
+    ("nosection.x=3", ["unknown section 'nosection'"]),
+])
+def test_bad_set_key_one_line_naming_section_and_valid_keys(setting, needles, capsys, tmp_path):
+    out = tmp_path / "o"
+    assert main(["train", "keydoor", "--out", str(out), "--no-progress", "--steps", "100", "--set", setting]) == 2
+    line = _one_error_line(capsys)
+    for needle in needles:
+        assert needle in line, (needle, line)
+    assert not (out / "config.yaml").exists()
+
+
+def test_missing_robosuite_names_the_extra(monkeypatch, capsys, tmp_path):
+    for name in [m for m in sys.modules if m.startswith(("robosuite.", "mujoco.", "hubsgo_ppl.envs.robosuite"))]:
+        monkeypatch.delitem(sys.modules, name)
+    monkeypatch.setitem(sys.modules, "robosuite", None)      # as if not installed: importing it fails
+    assert main(["train", "collect_three_balls", "--out", str(tmp_path / "o"), "--no-progress",
+                 "--steps", "100"]) == 2
+    line = _one_error_line(capsys)
+    assert 'pip install "hubsgo-ppl[robosuite]"' in line and "collect_three_balls" in line
+
+
+class _Marker:
+    def __init__(self, path):
+        self.path = str(path)
+
+    def __reduce__(self):
+        return (open, (self.path, "w"))
+
+
+@pytest.mark.parametrize("verb", ["evaluate", "resume", "subgoals"])
+def test_checkpoint_with_pickled_code_is_refused_in_one_line(verb, tmp_path, capsys):
+    from hubsgo_ppl.experiments.io import save_torch
+
+    run, marker = tmp_path / "run", tmp_path / "code-ran"
+    save_torch(run / "checkpoint.pt", {"format": 1, "config": {"task": "keydoor"}, "agent": _Marker(marker)})
+    argv = {"evaluate": ["evaluate", str(run)], "subgoals": ["subgoals", str(run), "--recompute"],
+            "resume": ["train", "keydoor", "--out", str(run), "--resume", "--no-progress"]}[verb]
+    assert main(argv) == 2
+    line = _one_error_line(capsys)
+    assert "refusing to load" in line and "io.open" in line
+    assert not marker.exists(), "the checkpoint's code ran"
+
+
+def test_resume_of_a_run_killed_before_its_first_checkpoint_starts_afresh(tmp_path, capsys):
+    run = tmp_path / "run"
+    (run / "tb").mkdir(parents=True)
+    (run / "tb" / "events.out.tfevents.1.host.1.0").write_bytes(b"partial")
+    (run / "config.yaml").write_text("task: keydoor\n")
+    (run / "metrics.csv").write_text("episode,return\r\n0,0.5\r\n1,0.0\r\n")
+    (run / ".metrics.csv.1a2b3c4d.tmp").write_text("left by a kill")
+    assert main(["train", "keydoor", "--out", str(run), "--resume", "--steps", "300", "--seed", "2",
+                 "--no-progress", *TINY]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "afresh" in err[0] and str(run) in err[0], err
+    rows = list(csv.DictReader((run / "metrics.csv").open(newline="")))
+    assert [r["episode"] for r in rows] == [str(i) for i in range(len(rows))]
+    assert "wall_time" in rows[0] and rows[-1]["env_steps"] and int(rows[-1]["env_steps"]) >= 300
+    assert yaml.safe_load((run / "config.yaml").read_text())["seed"] == 2
+    assert (run / "checkpoint.pt").is_file()
+    assert not (run / "tb" / "events.out.tfevents.1.host.1.0").exists()
+    assert not list(run.glob(".*.tmp"))
