@@ -45,7 +45,7 @@ def test_valid_spec_builds_a_critic(tmp_path):
         ({"likelihood": {"name": "gaussian", "scale": 0}}, "likelihood", "scale must be > 0"),
         ({"subgoals": [], "edges": []}, "subgoals", "N = 0"),
         ({"prior": {"name": "dirichlet"}}, "prior", "registered: bernoulli, beta_bernoulli, ising"),
-        ({"likelihood": {"name": "cauchy"}}, "likelihood", "registered: gaussian, laplace, student_t"),
+        ({"likelihood": {"name": "cauchy"}}, "likelihood", "registered: gaussian, laplace, outcome, student_t"),
         ({"edges": [["a", "b", "strong"]]}, "edges[0][2]", "positive"),
         ({"graph": "dense"}, "graph", "fully_connected"),
     ],
@@ -70,3 +70,35 @@ def test_builtin_spec_loads_by_name_from_any_cwd(tmp_path):
                          env={"PYTHONPATH": str(Path(__file__).resolve().parents[1])})
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "example-specific"
+
+
+def test_spec_subgoals_are_matched_to_the_catalogue_by_name_in_any_order():
+    from hubsgo_ppl.specs import ModelSpec, SpecError, match_subgoals
+
+    names = ["yellow_key", "yellow_door", "blue_key", "blue_door", "goal"]
+    spec = ModelSpec(name="s", subgoals=["goal", "blue_door", "yellow_key", "blue_key", "yellow_door"],
+                     edges=[("yellow_key", "yellow_door", "positive"), ("blue_door", "goal", "positive")])
+    matched = match_subgoals(spec, names, "my_spec.yaml")
+    assert matched.subgoals == names and matched.edges == spec.edges
+    assert match_subgoals(matched, names, "x") is matched
+    short = ModelSpec(name="s", subgoals=["goal", "yellow_key", "yellow_door", "blue_dor"])
+    with pytest.raises(SpecError) as err:
+        match_subgoals(short, names, "my_spec.yaml")
+    msg = str(err.value)
+    assert msg.startswith("my_spec.yaml: subgoals: missing blue_key, blue_door; not in the task: blue_dor;")
+    assert "\n" not in msg
+
+
+def test_a_spec_in_its_own_order_trains_on_the_catalogue_order(tmp_path):
+    """The critic built from a reordered spec is the one built from the catalogue-ordered spec."""
+    from hubsgo_ppl.experiments.run import RunConfig, resolve
+
+    text = (Path(__file__).resolve().parents[1] / "models" / "keydoor-specific.yaml").read_text()
+    text = text.replace("subgoals: [yellow_key, yellow_door, blue_key, blue_door, goal]",
+                        "subgoals: [goal, blue_door, blue_key, yellow_door, yellow_key]")
+    path = tmp_path / "mine.yaml"
+    path.write_text(text)
+    mine = resolve(RunConfig(task="keydoor", agent="hubsgo", model=str(path)))
+    shipped = resolve(RunConfig(task="keydoor", agent="hubsgo"))
+    assert mine["model_spec"]["subgoals"] == shipped["model_spec"]["subgoals"]
+    assert mine["model_spec"]["edges"] == shipped["model_spec"]["edges"]

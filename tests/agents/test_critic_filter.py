@@ -2,6 +2,7 @@
 
 import dataclasses
 
+import numpy as np
 import pytest
 import torch
 
@@ -45,3 +46,67 @@ def test_loop_config_pool_weight():
     assert LoopConfig().critic_pool_weight == "mean"
     with pytest.raises(ValueError, match="critic_pool_weight must be 'mean' or 'sum'"):
         LoopConfig(critic_pool_weight="max")
+
+
+def goal_dropping_critic(seed=0):
+    """A critic whose prior all but forbids the goal: Ĝt from it leaves the goal out."""
+    c = SubgoalCritic(GRAPH, prior="ising", prior_params={"strength": 0.5, "field": -6.0},
+                      likelihood_params={"scale": 1.0}, seed=seed)
+    sd = c.state_dict()
+    sd["theta"] = torch.tensor([4.0, 4.0, -4.0, -4.0, -8.0])   # q's mode: {yk, yd}, never the goal
+    c.load_state_dict(sd)
+    return c
+
+
+def test_safeguard_keeps_what_the_recent_successes_needed():
+    f = CriticFilter(goal_dropping_critic(), outcome_window=4, keep_fraction=0.5)
+    f.update(batches(1)[0])
+    assert f.allowed().tolist() == [True, True, False, False, False]      # no success yet: no guard
+    visited = np.array([True, True, False, False, True])
+    f.end_episode(visited, success=False)                                  # failures are not evidence
+    assert not f.allowed()[4]
+    f.end_episode(visited, success=True)
+    assert f.allowed().tolist() == [True, True, False, False, True]      # the goal is back
+    # given achieved sub-goals (B, N), every row gets the guard
+    rows = f.allowed(np.array([[False] * 5, [True, False, False, False, False]]))
+    assert rows[:, 4].all()
+    # a sub-goal in fewer than keep_fraction of the window's successes is not kept
+    other = np.array([False, False, True, True, True])
+    for _ in range(3):
+        f.end_episode(other, success=True)                                 # window: 1 x visited, 3 x other
+    kept = f.allowed()
+    assert kept[4] and kept[2] and kept[3]                                 # in 3/4 and 4/4 of them
+    f.end_episode(other, success=True)                                     # visited leaves the window
+    sd = f.state_dict()
+    g = CriticFilter(goal_dropping_critic(), outcome_window=4, keep_fraction=0.5)
+    g.load_state_dict(sd)
+    assert torch.equal(g.outcomes(), f.outcomes()) and (g.allowed() == f.allowed()).all()
+
+
+def test_safeguard_can_be_turned_off_and_bad_values_are_refused():
+    f = CriticFilter(goal_dropping_critic(), keep_fraction=0.0)
+    f.update(batches(1)[0])
+    f.end_episode(np.ones(5, dtype=bool), success=True)
+    assert not f.allowed()[4]
+    with pytest.raises(ValueError, match="filter_keep must be in"):
+        CriticFilter(goal_dropping_critic(), keep_fraction=1.5)
+    with pytest.raises(ValueError, match="outcome_window must be a positive integer"):
+        CriticFilter(goal_dropping_critic(), outcome_window=0)
+    with pytest.raises(ValueError, match="filter_start and loop.filter_end must be in"):
+        LoopConfig(filter_end=1.2)
+    assert LoopConfig().filter_end < 1.0     # the loop's own guard: a share of decisions reads G0
+
+
+def test_outcome_critic_waits_for_the_first_success_then_learns_the_route():
+    c = SubgoalCritic(GRAPH, prior="ising", prior_params={"strength": 3.0, "field": -2.0},
+                      likelihood="outcome", seed=0)
+    f = CriticFilter(c)
+    assert f.update(batches(1)[0]) == {} and f.allowed() is None           # no evidence: Ĝt = G0
+    route = np.array([False, False, True, True, True])
+    for _ in range(3):
+        f.end_episode(route, success=True)
+    for b in batches(150, seed=1):
+        stats = f.update(b)
+    assert stats["critic/set_size"] == 3.0
+    assert f.allowed().tolist() == route.tolist()
+    assert c.ranking(num_samples=2000, top_k=1)[0]["subgoals"] == ["bk", "bd", "goal"]

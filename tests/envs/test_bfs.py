@@ -10,6 +10,7 @@ import pytest
 
 from hubsgo_ppl.envs import make
 from hubsgo_ppl.envs.minigrid import bfs
+from hubsgo_ppl.envs.minigrid.bfs import optimal_steps
 from hubsgo_ppl.envs.minigrid.layout import load_maze_spec
 from hubsgo_ppl.resources import envs_dir
 from hubsgo_ppl.specs import SpecError
@@ -155,3 +156,29 @@ def test_transition_matches_minigrid_on_random_rollouts(tmp_path):
                 break
     assert changes > 20  # the rollouts really moved objects and opened doors
     assert seen[1:].all(), seen  # and every predicate held at some point
+
+
+@pytest.mark.parametrize("task, steps", [("threepair", 12), ("twowall", 30), ("keydoor_n9", 19),
+                                         ("keydoor_n17", 19), ("keydoor_n33", 19), ("keydoor_n65", 19)])
+def test_new_mazes_have_their_bfs_optimum(task, steps):
+    assert optimal_steps(task) == steps
+
+
+@pytest.mark.parametrize("task", ["keydoor_n17", "keydoor_n65"])
+def test_distractor_cells_are_off_every_near_shortest_path(task):
+    from hubsgo_ppl.envs import get_task
+    from hubsgo_ppl.envs.minigrid.bfs import shortest_path_cells
+
+    near = shortest_path_cells("keydoor", slack=2)
+    cat = get_task(task).catalogue
+    cells = [tuple(p.args["cell"]) for p in cat.subgoals if p.kind == "at"]
+    assert len(cells) == len(cat.names) - 5 and len(set(cells)) == len(cells)
+    assert not near & set(cells)
+
+
+def test_shortest_path_cells_cover_both_keydoor_routes_and_grow_with_slack():
+    from hubsgo_ppl.envs.minigrid.bfs import shortest_path_cells
+
+    exact = shortest_path_cells("keydoor")
+    assert {(1, 6), (4, 4), (8, 4), (4, 8), (8, 8), (11, 6)} <= exact     # start, both routes, goal
+    assert (1, 1) not in exact and exact < shortest_path_cells("keydoor", slack=2)

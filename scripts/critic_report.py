@@ -1,0 +1,102 @@
+"""The critic's acceptance tables from a sweep folder (sweeps/critic_routes.yaml, critic_value.yaml).
+
+For every task x variant over the seeds found: the mean return over training, the env steps until the
+success rate over the last 20 episodes first reaches 0.9 ("never" counts are given), the greedy return
+as a fraction of the BFS optimum (``hubsgo evaluate``, 5 episodes), and for HUBS-GO whether G*'s top
+set is exactly one route, with its probability and the runner-up's. Mean ± s.e. over seeds.
+
+    python scripts/critic_report.py runs/sweeps/critic [--tasks keydoor threepair ...] [--no-eval]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+# The routes of the shipped key/door mazes and FourRoom: sub-goal sets G* may name, nothing else.
+_PAIR = [["yellow_key", "yellow_door"], ["blue_key", "blue_door"]]
+ROUTES = {
+    "keydoor": [set(p + ["goal"]) for p in _PAIR],
+    "threepair": [set(p + ["goal"]) for p in _PAIR + [["red_key", "red_door"]]],
+    "twowall": [set(a + b + ["goal"]) for a in _PAIR for b in (["red_key", "red_door"], ["purple_key", "purple_door"])],
+    "fourroom": [{"door_top", "door_right", "goal"}, {"door_left", "door_bottom", "goal"}],
+}
+
+
+def routes(task: str) -> list[set[str]] | None:
+    return ROUTES.get("keydoor" if task.startswith("keydoor_n") else task.removesuffix("_incorrect"))
+
+
+def steps_to_success(metrics: pd.DataFrame, level: float = 0.9, window: int = 20) -> float:
+    rate = metrics["success"].rolling(window, min_periods=window).mean()
+    hit = metrics.loc[rate >= level, "env_steps"]
+    return float(hit.iloc[0]) if len(hit) else math.nan
+
+
+def mean_se(values: list[float]) -> str:
+    v = np.asarray([x for x in values if not math.isnan(x)], dtype=float)
+    if len(v) == 0:
+        return "–"
+    se = v.std(ddof=1) / math.sqrt(len(v)) if len(v) > 1 else 0.0
+    return f"{v.mean():.4g} ± {se:.2g}" if abs(v.mean()) < 10 else f"{v.mean():,.0f} ± {se:,.0f}"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("sweep_dir")
+    ap.add_argument("--tasks", nargs="*")
+    ap.add_argument("--no-eval", action="store_true")
+    args = ap.parse_args()
+    root = Path(args.sweep_dir)
+    rows = []
+    for task_dir in sorted(p for p in root.iterdir() if p.is_dir()):
+        if args.tasks and task_dir.name not in args.tasks:
+            continue
+        for var_dir in sorted(p for p in task_dir.iterdir() if p.is_dir()):
+            for run in sorted(var_dir.glob("seed*")):
+                if not (run / "subgoals.json").exists() and var_dir.name.startswith("hubsgo"):
+                    continue
+                m = pd.read_csv(run / "metrics.csv")
+                if var_dir.name == "hdqn" and not (run / "learning_curve.png").exists():
+                    continue
+                row = {"task": task_dir.name, "variant": var_dir.name, "seed": run.name,
+                       "mean_return": float(m["return"].mean()), "steps90": steps_to_success(m),
+                       "wall": float(m["wall_time"].iloc[-1])}
+                if not args.no_eval:
+                    from hubsgo_ppl.experiments.run import evaluate
+
+                    ev = evaluate(run, episodes=5)
+                    row["greedy_frac"] = ev.get("fraction_of_optimal", math.nan)
+                if (run / "subgoals.json").exists():
+                    table = json.loads((run / "subgoals.json").read_text())
+                    ranking = table.get("ranking") or table.get("top")
+                    top = set(ranking[0]["subgoals"])
+                    ok = routes(task_dir.name)
+                    row["one_route"] = None if ok is None else top in ok
+                    row["top"] = "{" + ", ".join(ranking[0]["subgoals"]) + "}"
+                    row["p_top"], row["p_second"] = ranking[0]["prob"], ranking[1]["prob"] if len(ranking) > 1 else 0.0
+                rows.append(row)
+    df = pd.DataFrame(rows)
+    print("| task | agent | seeds | mean return (training) | steps to 90% success | never | greedy / BFS optimum | G* one route | p(top) | p(runner-up) | wall s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    for (task, var), g in df.groupby(["task", "variant"], sort=False):
+        one = g["one_route"].sum() if "one_route" in g and g["one_route"].notna().any() else None
+        print(f"| {task} | {var} | {len(g)} | {mean_se(list(g['mean_return']))} | {mean_se(list(g['steps90']))} | "
+              f"{int(g['steps90'].isna().sum())} | {mean_se(list(g.get('greedy_frac', pd.Series([math.nan]))))} | "
+              f"{'' if one is None else f'{int(one)}/{len(g)}'} | "
+              f"{mean_se(list(g['p_top'])) if 'p_top' in g and g['p_top'].notna().any() else ''} | "
+              f"{mean_se(list(g['p_second'])) if 'p_second' in g and g['p_second'].notna().any() else ''} | "
+              f"{mean_se(list(g['wall']))} |")
+    if "top" in df:
+        print()
+        for _, r in df[df["top"].notna()].iterrows():
+            print(f"- {r['task']} {r['seed']}: {r['top']} p {r['p_top']:.3f} (runner-up {r['p_second']:.3f})")
+
+
+if __name__ == "__main__":
+    main()
