@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
 
@@ -72,10 +73,11 @@ def cmd_subgoals(args: argparse.Namespace) -> int:
         table = json.loads(path.read_text())
     else:
         resolved, env, agent, _ = load_run(run_dir)
-        if not (hasattr(agent, "filter") and hasattr(agent.filter, "critic")):
-            raise RunError(f"{run_dir}: agent {resolved['agent']!r} has no sub-goal critic; "
-                           "train with --agent hubsgo to learn sub-goal sets")
-        table = subgoal_table(agent.filter.critic, list(env.unwrapped.subgoal_names), args.samples)
+        with contextlib.closing(env):
+            if not (hasattr(agent, "filter") and hasattr(agent.filter, "critic")):
+                raise RunError(f"{run_dir}: agent {resolved['agent']!r} has no sub-goal critic; "
+                               "train with --agent hubsgo to learn sub-goal sets")
+            table = subgoal_table(agent.filter.critic, list(env.unwrapped.subgoal_names), args.samples)
     print(_fmt_ranking(table))
     return 0
 

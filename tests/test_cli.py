@@ -80,6 +80,8 @@ def test_console_script_is_installed():
     ("nonsense=3", ["unknown setting 'nonsense'", "sections:", "loop"]),
     ("loop=3", ["'loop' is a section"]),
     ("nosection.x=3", ["unknown section 'nosection'"]),
+    ("env.nonsense=3", ["cannot be built with --set env.nonsense=3", "'nonsense'"]),       # caught at build
+    ("loop.schedule_from=later", ["cannot be built with --set loop.schedule_from=later", "schedule_from"]),
 ])
 def test_bad_set_key_one_line_naming_section_and_valid_keys(setting, needles, capsys, tmp_path):
     out = tmp_path / "o"
@@ -120,6 +122,14 @@ def test_checkpoint_with_pickled_code_is_refused_in_one_line(verb, tmp_path, cap
     line = _one_error_line(capsys)
     assert "refusing to load" in line and "io.open" in line
     assert not marker.exists(), "the checkpoint's code ran"
+
+
+def test_incomplete_checkpoint_is_refused_in_one_line(tmp_path, capsys):
+    from hubsgo_ppl.experiments.io import save_torch
+
+    save_torch(tmp_path / "run" / "checkpoint.pt", {"format": 1, "agent": {}})
+    assert main(["evaluate", str(tmp_path / "run")]) == 2
+    assert "not a checkpoint of a `hubsgo train` run (missing ['config'" in _one_error_line(capsys)
 
 
 def test_resume_of_a_run_killed_before_its_first_checkpoint_starts_afresh(tmp_path, capsys):

@@ -10,6 +10,11 @@ Run directory::
     subgoals.json          G*: the configuration ranking from 10,000 critic samples (HUBS-GO)
     learning_curve.png     return and success over environment steps
     eval.json              written by ``evaluate``
+
+``--resume`` continues from the checkpoint: rows that the CSV logs gained after it (a run killed with
+``kill -9``) are cut off first, so a killed-and-resumed run ends with the files of an uninterrupted
+one (TensorBoard hides the events after the checkpoint). A run that stopped before its first
+checkpoint is started afresh.
 """
 
 from __future__ import annotations
@@ -100,26 +105,31 @@ def _section_settings(agent: str, family: str, low_level: str) -> dict[str, dict
         from ..agents.hiro import HIROConfig
 
         return {"hiro": of(HIROConfig)}
+    section = {"dqn": "dqn", "ddqn": "dqn", "ppo": "ppo", "td3": "td3"}.get(agent)
+    if section is not None:     # SB3 keyword arguments (their kinds vary: names only) and the trainer's unit
+        import stable_baselines3 as sb3
+
+        fixed = {"policy", "env", "seed", "verbose", "device", "_init_setup_model"}
+        names = set(of(getattr(sb3, section.upper()))) - fixed
+        return {section: dict.fromkeys([*names, "unit_steps"])}
     return {}
+
+
+_KINDS = ((bool, (bool,), "true or false"), (int, (int,), "an integer"), (float, (int, float), "a number"),
+          (str, (str,), "a string"), (tuple, (list, tuple), "a list, e.g. [64, 64]"))
 
 
 def _fit(default: Any, value: Any) -> tuple[Any, str | None]:
     """``(value, None)`` if ``value`` fits a setting whose default is ``default`` (a number written
     as ``3e-4``, which YAML reads as text, becomes a number), else ``(value, expected kind)``."""
-    if isinstance(default, bool):
-        return value, None if isinstance(value, bool) else "true or false"
-    if isinstance(default, (int, float)) and isinstance(value, str):
+    if isinstance(default, (int, float)) and not isinstance(default, bool) and isinstance(value, str):
         with contextlib.suppress(ValueError):
             number = float(value)
             value = int(number) if isinstance(default, int) and number.is_integer() else number
-    if isinstance(default, int):
-        return value, None if isinstance(value, int) and not isinstance(value, bool) else "an integer"
-    if isinstance(default, float):
-        return value, None if isinstance(value, (int, float)) and not isinstance(value, bool) else "a number"
-    if isinstance(default, str):
-        return value, None if isinstance(value, str) else "a string"
-    if isinstance(default, tuple):
-        return value, None if isinstance(value, (list, tuple)) else "a list, e.g. [64, 64]"
+    for kind, accepted, name in _KINDS:
+        if isinstance(default, kind):
+            ok = isinstance(value, accepted) and (kind is bool or not isinstance(value, bool))
+            return value, None if ok else name
     return value, None
 
 
@@ -213,19 +223,15 @@ def _check_writable(out: Path) -> None:
 def _tidy(out: Path, names: tuple[str, ...]) -> list[str]:
     """Remove ``names`` (files, or folders of TensorBoard events) from ``out`` and temporary files left
     by interrupted atomic writes of them or of the checkpoint; returns the names removed."""
-    removed = []
-    for name in names:
-        path = out / name
+    removed = [name for name in names if (out / name).exists()]
+    for path in (out / name for name in removed):
         if path.is_dir():
             for event in path.glob("events.out.tfevents.*"):
                 event.unlink()
             with contextlib.suppress(OSError):
                 path.rmdir()            # only if nothing else is in there
-        elif path.exists():
-            path.unlink()
         else:
-            continue
-        removed.append(name)
+            path.unlink()
     for path in out.iterdir() if out.is_dir() else ():
         if any(is_temp_file(path, target) for target in (*RUN_FILES, CHECKPOINT)) and path.is_file():
             path.unlink()
@@ -247,6 +253,15 @@ def _log_episode(logger: Logger, stats: Any, wall: float) -> None:
 def _save(out: Path, resolved: dict[str, Any], agent: Any, wall: float) -> None:
     save_torch(out / CHECKPOINT, {"format": FORMAT, "config": resolved, "agent": agent.state_dict(),
                                    "episodes": agent.episodes, "env_steps": agent.env_steps, "wall_time": wall})
+
+
+def _run_checkpoint(path: Path) -> dict[str, Any]:
+    ckpt = load_checkpoint(path)
+    missing = [k for k in ("config", "agent", "episodes", "env_steps") if k not in ckpt]
+    if missing or not isinstance(ckpt["config"], dict):
+        raise CheckpointError(f"{path}: not a checkpoint of a `hubsgo train` run (missing {missing or ['config']}); "
+                              "point at a run directory written by `hubsgo train`")
+    return ckpt
 
 
 def _restore(path: Path, ckpt: dict[str, Any], steps: int | None = None):
@@ -274,7 +289,7 @@ def load_run(run_dir: str | Path):
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise RunError(f"{run_dir}: no such run directory; pass the --out folder of `hubsgo train`")
-    ckpt = load_checkpoint(run_dir / CHECKPOINT)
+    ckpt = _run_checkpoint(run_dir / CHECKPOINT)
     env, agent = _restore(run_dir / CHECKPOINT, ckpt)
     return ckpt["config"], env, agent, ckpt
 
@@ -296,12 +311,12 @@ def _start(cfg: RunConfig, out: Path, resume: bool):
     ckpt_path = out / CHECKPOINT
     started = any((out / name).exists() for name in RUN_FILES)
     if resume and (ckpt_path.exists() or not started):
-        ckpt = load_checkpoint(ckpt_path)
+        ckpt = _run_checkpoint(ckpt_path)
         _check_writable(out)
-        env, agent = _restore(ckpt_path, ckpt, cfg.steps)
         _tidy(out, ())
         for name in EPISODE_LOGS:
-            truncate_csv(out / name, "episode", agent.episodes)
+            truncate_csv(out / name, "episode", int(ckpt["episodes"]))
+        env, agent = _restore(ckpt_path, ckpt, cfg.steps)
         # TensorBoard hides the interrupted writer's events after the checkpoint's last episode
         return ckpt["config"], env, agent, float(ckpt.get("wall_time", 0.0)), agent.env_steps + 1
     if ckpt_path.exists():
