@@ -32,6 +32,9 @@ class FixedSetFilter:
         self.weights.append(batch.weight)
         return {"critic/loss": 1.0}
 
+    def end_episode(self, visited, success):
+        self.ended = getattr(self, "ended", []) + [(np.asarray(visited).copy(), bool(success))]
+
     def state_dict(self):
         return {"updates": self.updates}
 
@@ -292,3 +295,23 @@ def test_low_level_shaping_uses_the_env_potential_and_refuses_to_run_without_one
     assert loop.low.potential is not None
     obs, _ = loop.env.reset(seed=0)
     assert loop.low.potential(torch.as_tensor(obs)[None]).shape == (1, 5)
+
+
+def test_the_filter_hears_each_training_episode_with_every_subgoal_achieved_on_the_way():
+    loop = _loop(steps=3000)
+    names = loop.names
+    f = FixedSetFilter(np.ones(len(names), dtype=bool))
+    loop.filter = f
+    seen = []
+    for _ in range(6):
+        before = loop.env_steps
+        stats = loop.run_episode(train=True)
+        seen.append((stats, before))
+    loop.run_episode(train=False)                           # evaluation episodes are not reported
+    assert len(f.ended) == 6
+    for (visited, success), (stats, _) in zip(f.ended, seen):
+        assert success == stats.success
+        # every option that ended on its sub-goal achieved it, so it was visited in this episode
+        assert visited.dtype == bool and visited.shape == (len(names),)
+        if success:
+            assert visited[names.index("goal")]
