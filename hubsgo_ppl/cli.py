@@ -7,6 +7,8 @@
     hubsgo diagnose RUN_DIR [--chains 4]
     hubsgo sweep SWEEP.yaml [--backend local|ray] [--workers K]
     hubsgo report SWEEP_DIR
+    hubsgo review RUN_DIR [--threshold 0.2] [--out DIR] [--no-gif]
+    hubsgo render RUN_DIR [--out FILE.gif] [--seed N]
 """
 
 from __future__ import annotations
@@ -136,6 +138,49 @@ def cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_review(args: argparse.Namespace) -> int:
+    from .experiments.review import review
+
+    out = Path(args.out) if args.out else Path(args.run_dir) / "review"
+    r = review(args.run_dir, threshold=args.threshold, out=out, gif=not args.no_gif, dead_band=args.dead_band,
+               num_samples=args.samples, top_k=args.top_k, last=args.last, seed=args.seed)
+    g = r["g_star"]
+    tie = "  (near tie with the next)" if g.get("near_tie") else ""
+    print(f"review of {r['run_dir']} ({r['task']}, {r['model']}) at env step {r['env_steps']:,} "
+          f"(episode {r['episodes']})")
+    print(f"G*: {{{', '.join(g['subgoals'])}}}  P={g['prob']:.3f}{tie}")
+    print("marginals P(w=1): " + ", ".join(f"{n}={p:.2f}" for n, p in r["marginals"].items()))
+    t = r["trend"]
+    if t["delta"] is not None:
+        signed = (f"{d:+.2f}".replace("-0.00", "+0.00") for d in t["delta"].values())   # no "-0.00"
+        print(f"trend since step {t['env_steps']} ({t['since']}): "
+              + ", ".join(f"{n} {d}" for n, d in zip(t["delta"], signed)))
+    flagged = [f"{c['u']}--{c['v']} (you: {c['human']}, J={c['J']:+.2f})" for c in r["flagged_edges"]]
+    print(f"flagged edges (learned sign contradicts yours): {'; '.join(flagged) or 'none'}")
+    drops = [f"{d['name']} (P={d['marginal']:.2f})" for d in r["suggested_drops"]]
+    print(f"suggested drops (P(w=1) < {r['threshold']:.2f}): {', '.join(drops) or 'none'}")
+    succ = r["achieved"]["recent_successes"]
+    if succ["episodes"]:
+        print(f"achieved on the {succ['episodes']} recent successes: "
+              + ", ".join(f"{n} {f:.0%}" for n, f in succ["frequency"].items()))
+    else:
+        print("achieved on recent successes: no successful episode yet")
+    for kind, name in r["files"].items():
+        print(f"{kind}: {out / name}")
+    return 0
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    from .diagnostics.render import render_episode
+    from .experiments.review import format_chosen
+
+    r = render_episode(args.run_dir, args.out, seed=args.seed, tile_size=args.tile_size, fps=args.fps)
+    outcome = "success" if r["success"] else "no success"
+    print(f"{r['path']}: {r['frames']} frames, one greedy episode of {r['length']} steps (env seed {r['env_seed']}, "
+          f"return {r['return']:.4f}, {outcome}); sub-goals chosen: {format_chosen(r['chosen'])}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     from .agents.factory import agent_names
 
@@ -191,6 +236,28 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--sweep", help="report only this grid's tasks, variants and seeds (a sweep .yaml or built-in "
                                    "name), for a folder several sweeps ran into; default: the folder's sweep.yaml")
     r.set_defaults(func=cmd_report)
+
+    v = sub.add_parser("review", help="mixed-initiative review of a HUBS-GO run: G*, marginals and their trend, "
+                                      "learned couplings against your edge signs, suggested spec changes")
+    v.add_argument("run_dir")
+    v.add_argument("--threshold", type=float, default=0.2, help="suggest dropping sub-goals with P(w=1) below this")
+    v.add_argument("--dead-band", type=float, default=0.1,
+                   help="couplings with |J| at most this have no sign (neither contradict nor suggest one)")
+    v.add_argument("--out", help="review folder (default RUN_DIR/review; its review.json is the trend's baseline)")
+    v.add_argument("--no-gif", action="store_true", help="skip the greedy-episode GIF (MiniGrid mazes)")
+    v.add_argument("--seed", type=int, default=None, help="evaluation seed of the GIF's episode")
+    v.add_argument("--samples", type=int, default=10_000, help="critic samples for G*")
+    v.add_argument("--top-k", type=int, default=5, help="sub-goal sets listed")
+    v.add_argument("--last", type=int, default=20, help="episodes of metrics.csv summarised")
+    v.set_defaults(func=cmd_review)
+
+    n = sub.add_parser("render", help="animated GIF of one greedy episode on a MiniGrid maze, sub-goals marked")
+    n.add_argument("run_dir")
+    n.add_argument("--out", help="GIF to write (default RUN_DIR/episode.gif)")
+    n.add_argument("--seed", type=int, default=None, help="evaluation seed (default: derived from the run's)")
+    n.add_argument("--tile-size", type=int, default=32, help="pixels per grid cell")
+    n.add_argument("--fps", type=float, default=6.0, help="frames per second")
+    n.set_defaults(func=cmd_render)
 
     k = sub.add_parser("tasks", help="list the tasks and their sub-goal catalogues")
     k.set_defaults(func=cmd_tasks)

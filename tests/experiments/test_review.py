@@ -1,0 +1,222 @@
+"""`hubsgo review`: G* from the critic, flagged edges, suggested drops, the marginals' trend, refusals."""
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+import torch
+
+from hubsgo_ppl.cli import main
+from hubsgo_ppl.experiments.io import load_checkpoint, save_torch
+from hubsgo_ppl.experiments.logger import read_csv_rows
+from hubsgo_ppl.experiments.review import (compare_couplings, format_chosen, human_edge_signs, marginal_trend,
+                                           review, suggested_drops)
+from hubsgo_ppl.experiments.run import RunConfig, RunError, load_run, train
+
+TINY = ["high.learning_starts=8", "high.batch_size=8", "low.learning_starts=64", "low.batch_size=32",
+        "low.hidden=[32]", "high.hidden=[32]", "env.max_steps=150", "loop.option_steps=15"]
+
+
+def _train(out, agent="hubsgo", steps=1500):
+    train(RunConfig(task="keydoor", agent=agent, steps=steps, seed=3, overrides=TINY), out, progress=False)
+    return out
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    return _train(tmp_path_factory.mktemp("review") / "hubsgo")
+
+
+def _copy(run, dest):
+    shutil.copytree(run, dest)
+    shutil.rmtree(dest / "review", ignore_errors=True)
+    return dest
+
+
+def _edit_critic(run_dir, theta=None, coupling=None, outcomes=None):
+    """Overwrite entries of the checkpoint's critic parameters ({index: value}) and the filter's
+    recent successes (rows of achieved sets)."""
+    path = run_dir / "checkpoint.pt"
+    ckpt = load_checkpoint(path)
+    critic = ckpt["agent"]["filter"]["critic"]
+    if outcomes is not None:
+        ckpt["agent"]["filter"]["outcomes"] = torch.tensor(outcomes, dtype=torch.float32)
+    for i, v in (theta or {}).items():
+        critic["theta"][i] = v
+    for i, v in (coupling or {}).items():
+        critic["coupling"][i] = v
+    save_torch(path, ckpt)
+    return critic["edges"]
+
+
+def test_g_star_is_the_critics_top_set_and_files_are_written(run, tmp_path):
+    out = tmp_path / "rv"
+    r = review(run, out=out, gif=False)
+    _, env, agent, _ = load_run(run)
+    env.close()
+    critic = agent.filter.critic
+    ranking = critic.ranking(num_samples=10_000, top_k=5)      # the same critic, freshly loaded
+    assert r["g_star"]["subgoals"] == ranking[0]["subgoals"] and r["ranking"] == ranking
+    marg = critic.marginals().numpy()
+    assert np.allclose([r["marginals"][n] for n in critic.names], marg)
+    assert r["env_steps"] == agent.env_steps >= 1500 and r["episodes"] == agent.episodes
+    assert json.loads((out / "review.json").read_text()) == json.loads(json.dumps(r))
+    md = (out / "review.md").read_text()
+    assert "G*" in md and f"env step {agent.env_steps:,}" in md and "{" + ", ".join(r["g_star"]["subgoals"]) + "}" in md
+    assert (out / "mrf_graph.png").stat().st_size > 0 and not (out / "episode.gif").exists()
+    # the spec's edges, unedited, agree with the couplings they initialised
+    assert [(c["u"], c["v"], c["human"]) for c in r["couplings"]] == [
+        (u, v, {1: "positive", -1: "negative", 0: "unknown"}[s]) for u, v, s in critic.graph.edges]
+    assert r["flagged_edges"] == [] and r["trend"]["since"] == "first row of critic_history.csv"
+    first = read_csv_rows(run / "critic_history.csv")[0]
+    assert r["trend"]["env_steps"] == int(first["env_steps"])
+    for n in critic.names:
+        assert r["trend"]["delta"][n] == pytest.approx(r["marginals"][n] - float(first[n]))
+    # the filter's recent successes and the metrics log
+    succ = r["achieved"]["recent_successes"]
+    E = agent.filter.outcomes().shape[0]
+    assert succ["episodes"] == E
+    if E:
+        assert succ["frequency"] == pytest.approx(dict(zip(critic.names, agent.filter.outcomes().mean(0).tolist())))
+    rows = read_csv_rows(run / "metrics.csv")[-20:]
+    assert r["achieved"]["metrics"]["success_rate"] == pytest.approx(np.mean([float(x["success"]) for x in rows]))
+
+
+def test_flagged_edges_and_drops_from_an_edited_critic(run, tmp_path):
+    run2 = _copy(run, tmp_path / "edited")
+    wins = [[1, 1, 0, 0, 1], [0, 0, 1, 1, 1], [0, 0, 1, 1, 1], [0, 0, 1, 1, 1]]     # yellow once, blue 3 times
+    edges = [tuple(e) for e in _edit_critic(run2, theta={2: -6.0}, coupling={0: -0.8, 2: 0.05, 3: 0.5},
+                                            outcomes=wins)]
+    # edge 0 is positive and learned -0.8: flagged; edge 2 is negative at +0.05: inside the dead band
+    assert edges[0][2] == 1 and edges[2][2] == -1 and edges[3][2] == 1
+    r = review(run2, threshold=0.2, gif=False)
+    assert [(c["u"], c["v"]) for c in r["flagged_edges"]] == [edges[0][:2]]
+    assert r["flagged_edges"][0]["J"] == pytest.approx(-0.8) and r["flagged_edges"][0]["human"] == "positive"
+    want = sorted(n for n, p in r["marginals"].items() if p < 0.2)
+    assert "blue_key" in want and sorted(d["name"] for d in r["suggested_drops"]) == want
+    succ = r["achieved"]["recent_successes"]
+    assert succ["episodes"] == 4
+    assert succ["frequency"] == pytest.approx({"yellow_key": 0.25, "yellow_door": 0.25, "blue_key": 0.75,
+                                               "blue_door": 0.75, "goal": 1.0})
+    assert {d["name"]: d["success_frequency"] for d in r["suggested_drops"]}["blue_key"] == 0.75
+    md = (run2 / "review" / "review.md").read_text()
+    assert f"**edge {edges[0][0]} — {edges[0][1]}**" in md
+    assert "**drop blue_key**" in md and "achieved on 75% of the recent successes (the successes need it" in md
+
+
+def test_second_review_trend_is_the_difference_of_marginals(run, tmp_path):
+    run2 = _copy(run, tmp_path / "twice")
+    first = review(run2, gif=False)
+    _edit_critic(run2, theta={0: 2.0, 4: -3.0})
+    second = review(run2, gif=False)
+    t = second["trend"]
+    assert t["since"] == "previous review" and t["env_steps"] == first["env_steps"]
+    assert t["previous"] == first["marginals"]
+    for n in second["names"]:
+        assert t["delta"][n] == pytest.approx(second["marginals"][n] - first["marginals"][n])
+    assert t["delta"]["yellow_key"] > 0.1 and t["delta"]["goal"] < -0.1
+    # a third review at the same checkpoint: no change
+    third = review(run2, gif=False)
+    assert all(abs(d) < 1e-12 for d in third["trend"]["delta"].values())
+
+
+def test_review_embeds_a_gif_of_a_greedy_episode(run, tmp_path):
+    from PIL import Image
+
+    out = tmp_path / "rv"
+    r = review(run, out=out)
+    assert r["files"]["gif"] == "episode.gif"
+    with Image.open(out / "episode.gif") as im:
+        assert im.n_frames == r["episode"]["length"] + 1 == r["episode"]["frames"]
+    assert "![greedy episode](episode.gif)" in (out / "review.md").read_text()
+
+
+def test_cli_review_prints_summary(run, tmp_path, capsys):
+    out = tmp_path / "cli"
+    assert main(["review", str(run), "--out", str(out), "--no-gif", "--threshold", "0.3"]) == 0
+    text = capsys.readouterr().out
+    assert "G*: {" in text and "flagged edges" in text and "suggested drops (P(w=1) < 0.30)" in text
+    assert f"json: {out / 'review.json'}" in text and (out / "review.md").is_file()
+
+
+def _one_error_line(capsys):
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("hubsgo: error: "), err
+    return err[0]
+
+
+def test_hdqn_run_is_refused_in_one_line(tmp_path, capsys):
+    run = _train(tmp_path / "hdqn", agent="hdqn", steps=300)
+    with pytest.raises(RunError, match="no sub-goal critic"):
+        review(run)
+    assert main(["review", str(run)]) == 2
+    assert "agent 'hdqn' has no sub-goal critic" in _one_error_line(capsys)
+    assert not (run / "review").exists()
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--threshold", "1.5"], "--threshold must be a probability"),
+    (["--dead-band", "-1"], "--dead-band must be a number >= 0"),
+])
+def test_bad_arguments_one_line(run, argv, needle, tmp_path, capsys):
+    assert main(["review", str(run), "--out", str(tmp_path / "o"), "--no-gif", *argv]) == 2
+    assert needle in _one_error_line(capsys)
+
+
+def test_missing_run_dir_one_line(capsys):
+    assert main(["review", "/nonexistent/run"]) == 2
+    assert "no such run directory" in _one_error_line(capsys)
+
+
+# -- the pieces, on hand-made data ---------------------------------------------------------------
+
+def test_compare_couplings_flags_exactly_the_contradicting_signs():
+    pairwise = {("a", "b"): -0.5,     # positive, learned negative: flagged
+                ("a", "c"): -0.05,    # positive, inside the dead band: not flagged
+                ("b", "c"): 0.3,      # negative, learned positive: flagged
+                ("c", "d"): -1.0,     # negative, agrees
+                ("a", "d"): 0.7,      # unknown: no flag, a suggested sign
+                ("b", "d"): 0.1,      # positive exactly at the band edge: agrees ("near zero")
+                ("d", "e"): -0.2}     # not in the spec (a preset's edge): unknown
+    spec = {"edges": [["a", "b", "positive"], ["c", "a", "positive"], ["b", "c", "negative"],
+                      ["d", "c", "negative"], ["a", "d", "unknown"], ["b", "d", "positive"]]}
+    rows = compare_couplings(pairwise, human_edge_signs(spec), dead_band=0.1)
+    by = {(r["u"], r["v"]): r for r in rows}
+    assert [k for k, r in by.items() if r["contradicts"]] == [("a", "b"), ("b", "c")]
+    assert by[("a", "c")]["human"] == "positive" and by[("a", "c")]["learned"] == "near zero"
+    assert by[("a", "d")]["suggestion"] == "declare the edge positive" and not by[("a", "d")]["contradicts"]
+    assert by[("d", "e")]["human"] == "unknown" and by[("d", "e")]["suggestion"] == "declare the edge negative"
+    assert by[("b", "d")]["suggestion"] is None and by[("c", "d")]["suggestion"] is None
+    assert by[("a", "b")]["suggestion"] == "flip the edge to negative or remove it"
+    # a wider band forgives the weaker contradiction
+    wide = compare_couplings(pairwise, human_edge_signs(spec), dead_band=0.4)
+    assert [(r["u"], r["v"]) for r in wide if r["contradicts"]] == [("a", "b")]
+    # without a spec, the graph's signs are the human's
+    assert human_edge_signs(None, [("a", "b", 1), ("b", "c", -1), ("c", "d", 0)]) == {
+        frozenset("ab"): "positive", frozenset("bc"): "negative", frozenset("cd"): "unknown"}
+
+
+def test_metrics_summary_reads_visited_columns_when_logged(tmp_path):
+    from hubsgo_ppl.experiments.review import metrics_summary
+
+    path = tmp_path / "metrics.csv"
+    path.write_text("episode,env_steps,success,return,visited/a,visited/b\n"
+                    "0,10,0,0.0,1,0\n1,20,1,0.5,1,0\n2,30,1,0.7,1,1\n3,40,0,0.0,0,1\n")
+    m = metrics_summary(path, ["a", "b"], last=3)
+    assert m["episodes"] == 3 and m["first_episode"] == 1 and m["successes"] == 2
+    assert m["success_rate"] == pytest.approx(2 / 3) and m["mean_return"] == pytest.approx(0.4)
+    assert m["frequency"] == {"a": 1.0, "b": 0.5}                # over the successful episodes only
+    assert metrics_summary(tmp_path / "none.csv", ["a"]) is None
+
+
+def test_drops_and_trend_on_hand_made_marginals():
+    marg = {"a": 0.05, "b": 0.5, "c": 0.19, "d": 0.2}
+    drops = suggested_drops(marg, 0.2, {"a": 0.0, "b": 1.0, "c": 1.0, "d": 1.0})
+    assert [d["name"] for d in drops] == ["a", "c"] and drops[1]["success_frequency"] == 1.0
+    assert suggested_drops(marg, 0.2)[0]["success_frequency"] is None
+    t = marginal_trend(marg, {"source": "previous review", "env_steps": 10, "marginals": {"a": 0.1, "b": 0.5,
+                                                                                         "c": 0.0, "d": 1.0}})
+    assert t["delta"] == pytest.approx({"a": -0.05, "b": 0.0, "c": 0.19, "d": -0.8})
+    assert marginal_trend(marg, None)["delta"] is None
+    assert format_chosen(["a", "a", "b", "a"]) == "a x2, b, a"
