@@ -20,7 +20,7 @@ BUILTIN = {"keydoor": "hubsgo/KeyDoor-v0", "fourroom": "hubsgo/FourRoom-v0",
 
 def test_builtin_task_names_and_ids():
     found = {n: t.env_id for n, t in T.tasks().items() if t.family == "minigrid"}
-    assert found == BUILTIN
+    assert BUILTIN.items() <= found.items()
 
 
 def test_register_is_idempotent_and_gym_make_works():
