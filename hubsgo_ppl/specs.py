@@ -82,6 +82,11 @@ from typing import Literal  # noqa: E402
 from pydantic import ConfigDict as _ConfigDict  # noqa: E402
 from pydantic import Field, field_validator, model_validator  # noqa: E402
 
+# The critic's settings are defined by the critic's package (pydantic only, no torch), so that specs
+# depend on infer and never the other way round. The registries of priors and likelihoods import
+# Pyro, so the validators below import them when they run, not when this module loads.
+from .infer.config import InferenceSpec  # noqa: E402
+
 __all__ += ["ComponentSpec", "InferenceSpec", "ModelSpec", "load_model_spec", "list_model_specs", "match_subgoals"]
 
 EdgeSign = Literal["positive", "negative", "unknown"]
@@ -95,23 +100,6 @@ class ComponentSpec(BaseModel):
 
     def params(self) -> dict[str, Any]:
         return dict(self.model_extra or {})
-
-
-class InferenceSpec(StrictModel):
-    """Inference settings; the same fields and defaults as ``infer.critic.InferenceConfig``."""
-
-    lr: float = Field(0.05, gt=0, description="Adam step size")
-    burn_in: int = Field(32, ge=0, description="MH sweeps per update")
-    num_samples: int = Field(64, ge=2, description="MH chains / ELBO particles per update")
-    kernel: Literal["single_site", "block"] = "single_site"
-    baseline_beta: float = Field(0.9, ge=0, lt=1, description="decaying-average baseline factor")
-    init_scale: float = Field(1.0, description="initial coupling = init_scale * edge sign (init: edges)")
-    init: Literal["edges", "prior"] = Field(
-        "edges", description="q starts at theta 0, J = init_scale * sign ('edges') or equal to the prior")
-    exact_max_n: int = Field(16, ge=0, le=20, description="exact log Z up to this N")
-    pyro_validation: Literal["first", "always", "never"] = Field(
-        "first", description="Pyro validation on the first update only, on every update, or never")
-    jit: bool = Field(True, description="compile the TraceGraph_ELBO step of TDBatch updates (same numbers, faster)")
 
 
 class ModelSpec(StrictModel):

@@ -48,6 +48,9 @@ def test_valid_spec_builds_a_critic(tmp_path):
         ({"likelihood": {"name": "cauchy"}}, "likelihood", "registered: gaussian, laplace, outcome, student_t"),
         ({"edges": [["a", "b", "strong"]]}, "edges[0][2]", "positive"),
         ({"graph": "dense"}, "graph", "fully_connected"),
+        ({"inference": {"lr": -1.0}}, "inference.lr", "greater than 0"),
+        ({"inference": {"kernel": "gibbs"}}, "inference.kernel", "'single_site' or 'block'"),
+        ({"inference": {"jit": "yes"}}, "inference.jit", "valid boolean"),
     ],
 )
 def test_spec_errors_name_file_key_and_fix(tmp_path, changes, key, fix):

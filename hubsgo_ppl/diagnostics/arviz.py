@@ -39,7 +39,6 @@ silenced for our import only (message-matched), so other ``FutureWarning``s stil
 from __future__ import annotations
 
 import os
-import tempfile
 import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -47,6 +46,8 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+
+from ..experiments.io import atomic_path
 
 with warnings.catch_warnings():
     # ArviZ 0.23's import-time notice about the 1.x refactor; see the module docstring.
@@ -249,25 +250,12 @@ def summary(idata: az.InferenceData, var_names: Sequence[str] = ("w",)) -> pd.Da
 
 
 def atomic_write(path: str | os.PathLike[str], write: Callable[[Path], None], suffix: str = "") -> Path:
-    """Write ``path`` through ``write(tmp_path)`` into a temp file in the same directory, then
-    ``os.replace`` it into place, so readers never see a partial file and a failed write leaves
-    any previous file untouched. Parent directories are created."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".tmp{suffix}", dir=path.parent)
-    os.close(fd)
-    tmp = Path(tmp_name)
-    try:
+    """Write ``path`` through ``write(tmp_path)`` with :func:`hubsgo_ppl.experiments.io.atomic_path`: the
+    temporary file (ending in ``suffix``) replaces ``path`` only once ``write`` has returned, so readers
+    never see a partial file and a failed write leaves any previous file untouched."""
+    with atomic_path(path, suffix=suffix) as tmp:
         write(tmp)
-        # mkstemp creates 0600; give the file the mode a plain open() would have.
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    return path
+    return Path(path)
 
 
 def save_netcdf(idata: az.InferenceData, path: str | os.PathLike[str]) -> Path:

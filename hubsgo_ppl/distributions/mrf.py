@@ -16,8 +16,8 @@ whose gradient, s(w_p) - mean_{q != p} s(w_q) with s the sufficient statistics, 
 estimate of the normalised score s(w_p) - E_q[s] = grad log q(w_p), i.e. grad log Z is taken as the
 mean sufficient statistics of the other (independent) particles. It needs >= 2 particles.
 
-Sampling runs the MH kernels of :mod:`hubsgo_ppl.infer.mh` under ``no_grad`` for ``burn_in`` sweeps,
-starting from ``init`` (persistent chains) when given, else from uniform random bits.
+Sampling runs the MH kernels of :mod:`hubsgo_ppl.distributions.mh_kernels` under ``no_grad`` for
+``burn_in`` sweeps, starting from ``init`` (persistent chains) when given, else from uniform random bits.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from pyro.distributions.score_parts import ScoreParts
 from torch.distributions import constraints
 
 from ._provenance import retrack, to_batch_shape, untrack
-from ..infer.mh import KERNELS, coupling_matrix, mh_steps, unnormalized_log_prob
+from .mh_kernels import KERNELS, coupling_matrix, mh_steps, unnormalized_log_prob
 
 __all__ = ["PairwiseMRF", "state_table", "EXACT_LIMIT"]
 
@@ -72,7 +72,7 @@ class PairwiseMRF(TorchDistribution):
     :param coupling: pairwise factors J, ``(..., E)``, one per row of ``edge_index``.
     :param edge_index: ``(E, 2)`` LongTensor of distinct site pairs.
     :param burn_in: MH sweeps run by :meth:`sample` (paper: 32).
-    :param kernel: ``"single_site"`` or ``"block"`` (see :mod:`hubsgo_ppl.infer.mh`).
+    :param kernel: ``"single_site"`` or ``"block"`` (see :mod:`hubsgo_ppl.distributions.mh_kernels`).
     :param init: chain states to start :meth:`sample` from, broadcastable to the sample's shape.
     :param generator: torch.Generator for sampling; a generator seeded with 0 if None.
     :param exact_max_n: largest N (<= 20) handled by exact enumeration.

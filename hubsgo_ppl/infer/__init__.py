@@ -1,7 +1,9 @@
-"""Inference for the HUBS-GO critic: MH kernels, prior/likelihood registries and the critic itself.
+"""Inference for the HUBS-GO critic: its settings, prior/likelihood registries, the Pyro MCMC kernel
+adapter and the critic itself.
 
-Exports load lazily: ``hubsgo_ppl.infer.mh`` sits below ``distributions.mrf`` in the layering, so this
-package must not import the critic (which imports the MRF) just because the kernels were imported.
+Exports load lazily, so that the light modules stay light to import: :mod:`.config` (pydantic only,
+nested by :mod:`hubsgo_ppl.specs`) and :mod:`.tdbatch` (torch only, built by the agents) must not pull
+in Pyro and the critic just because their package was imported.
 """
 
 from __future__ import annotations
@@ -22,7 +24,8 @@ _EXPORTS = {
     "get_likelihood": "likelihoods",
     "LIKELIHOODS": "likelihoods",
     "Likelihood": "likelihoods",
-    "InferenceConfig": "critic",
+    "InferenceConfig": "config",
+    "InferenceSpec": "config",
     "TDBatch": "tdbatch",
     "SubgoalCritic": "critic",
     "CompiledTraceGraph_ELBO": "compiled_elbo",

@@ -5,7 +5,7 @@ import pytest
 import torch
 
 from hubsgo_ppl.distributions import PairwiseMRF, state_table
-from hubsgo_ppl.infer.mh import coupling_matrix
+from hubsgo_ppl.distributions.mh_kernels import coupling_matrix
 
 
 def random_mrf(n, seed, dense=True, batch=()):

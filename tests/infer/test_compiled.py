@@ -106,11 +106,14 @@ def test_compiling_does_not_move_the_baseline():
 
 
 def test_compiled_elbo_is_tied_to_its_model_and_guide():
+    """The compiled ELBO runs the critic's one model and guide (the eager ELBO runs the same pair)."""
     critic = SubgoalCritic(GRAPH, seed=0)
     elbo = critic._compiled_elbo
     assert isinstance(elbo, CompiledTraceGraph_ELBO)
+    assert elbo.model == critic._model and elbo.guide == critic._guide
+    other = SubgoalCritic(GRAPH, seed=0)
     with pytest.raises(ValueError, match="another model and guide"):
-        elbo.loss_and_grads(critic._model, critic._guide, batch(0))
+        elbo.loss_and_grads(other._model, other._guide, other._draw(), *batch(0).tensors())
     assert BASELINE not in pyro.get_param_store()            # the critic's store stays private
 
 

@@ -12,9 +12,10 @@ import pyro
 import pytest
 import torch
 
-from hubsgo_ppl.distributions import PairwiseMRF, state_table
+from hubsgo_ppl.distributions import PairwiseMRF, mh_kernels, state_table
+from hubsgo_ppl.distributions.mh_kernels import block_flip_step, run_chains, single_site_sweep
 from hubsgo_ppl.infer import mh
-from hubsgo_ppl.infer.mh import MRFMHKernel, block_flip_step, run_chains, single_site_sweep
+from hubsgo_ppl.infer.mh import MRFMHKernel
 
 TV_TOL = 0.03
 
@@ -81,7 +82,7 @@ def test_compiled_scan_is_the_eager_loop_to_the_last_bit(kind, dtype):
         w = torch.randint(0, 2, (num_chains, n), generator=g).to(dtype)
         ga, gb = torch.Generator().manual_seed(sweeps), torch.Generator().manual_seed(sweeps)
         compiled = single_site_sweep(w, theta, coupling, ei, ga, sweeps=sweeps)
-        eager = mh._eager_sweeps(w, theta, coupling, ei, gb, sweeps)
+        eager = mh_kernels._eager_sweeps(w, theta, coupling, ei, gb, sweeps)
         assert compiled.dtype == eager.dtype == dtype
         assert torch.equal(compiled, eager), (kind, num_chains, sweeps)
         assert torch.equal(ga.get_state(), gb.get_state())
@@ -92,8 +93,15 @@ def test_compiled_scan_blocks_of_uniforms_keep_the_stream(monkeypatch):
     theta, coupling, ei = random_mrf(6, seed=3)
     w = torch.zeros(50, 6)
     full = single_site_sweep(w, theta, coupling, ei, torch.Generator().manual_seed(4), sweeps=40)
-    monkeypatch.setattr(mh, "_LOG_U_ELEMENTS", 50 * 6 * 3)     # three sweeps per block
+    monkeypatch.setattr(mh_kernels, "_LOG_U_ELEMENTS", 50 * 6 * 3)     # three sweeps per block
     assert torch.equal(full, single_site_sweep(w, theta, coupling, ei, torch.Generator().manual_seed(4), sweeps=40))
+
+
+def test_infer_mh_re_exports_the_kernels():
+    """The critic and older callers import the kernels from infer.mh; they are the distribution's."""
+    for name in ("KERNELS", "ChromaticScan", "coupling_matrix", "single_site_sweep", "block_flip_step",
+                 "mh_steps", "run_chains", "_eager_sweeps"):
+        assert getattr(mh, name) is getattr(mh_kernels, name), name
 
 
 def test_kernels_keep_shapes_and_are_seeded():

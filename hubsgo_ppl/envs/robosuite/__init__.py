@@ -7,13 +7,9 @@ Each is a ``ManipulationEnv`` subclass (one per module) sharing
 
 from .base import SubgoalKind, SubgoalManipulationEnv, osc_position_controller, set_sampler_rng
 from .collect_three_balls import CollectThreeBalls
+from .gym_wrapper import TASK_CLASSES, RobosuiteTaskEnv, make_robosuite_task
 from .push_any_one import PushAnyOne
 from .stack_cubes import StackCubes
-
-#: ``options.env_class`` of a catalogue -> task class
-TASK_CLASSES = {cls.__name__: cls for cls in (StackCubes, PushAnyOne, CollectThreeBalls)}
-
-from .gym_wrapper import RobosuiteTaskEnv, make_robosuite_task  # noqa: E402  (needs TASK_CLASSES)
 
 __all__ = ["SubgoalManipulationEnv", "SubgoalKind", "osc_position_controller", "set_sampler_rng",
            "StackCubes", "PushAnyOne", "CollectThreeBalls",

@@ -16,8 +16,15 @@ import numpy as np
 from ...specs import SpecError
 from ..subgoals import Catalogue, load_catalogue
 from .base import SubgoalManipulationEnv
+from .collect_three_balls import CollectThreeBalls
+from .push_any_one import PushAnyOne
+from .stack_cubes import StackCubes
 
-__all__ = ["RobosuiteTaskEnv", "make_robosuite_task"]
+__all__ = ["TASK_CLASSES", "RobosuiteTaskEnv", "make_robosuite_task"]
+
+#: ``options.env_class`` of a catalogue -> task class
+TASK_CLASSES: dict[str, type[SubgoalManipulationEnv]] = {
+    cls.__name__: cls for cls in (StackCubes, PushAnyOne, CollectThreeBalls)}
 
 
 class RobosuiteTaskEnv(gym.Env):
@@ -87,11 +94,6 @@ class RobosuiteTaskEnv(gym.Env):
         self.task.close()
 
 
-def _task_classes() -> dict[str, type[SubgoalManipulationEnv]]:
-    from . import TASK_CLASSES
-    return TASK_CLASSES
-
-
 def make_robosuite_task(catalogue: str | Path | Catalogue, **kwargs: Any) -> RobosuiteTaskEnv:
     """Build the task a ``family: robosuite`` catalogue describes.
 
@@ -105,12 +107,11 @@ def make_robosuite_task(catalogue: str | Path | Catalogue, **kwargs: Any) -> Rob
         raise SpecError(f"{cat.source}: family: {cat.family!r} is not a robosuite task; "
                         f"use hubsgo_ppl.envs.make() for it")
     options = {**cat.options, **kwargs}
-    classes = _task_classes()
     env_class = options.pop("env_class", None)
-    if env_class not in classes:
+    if env_class not in TASK_CLASSES:
         raise SpecError(f"{cat.source}: options.env_class: {env_class!r} is not a robosuite task; "
-                        f"use one of: {', '.join(classes)}")
-    cls = classes[env_class]
+                        f"use one of: {', '.join(TASK_CLASSES)}")
+    cls = TASK_CLASSES[env_class]
     try:
         task = cls(cat, **options)
     except TypeError as exc:

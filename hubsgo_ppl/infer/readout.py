@@ -1,0 +1,182 @@
+"""Reading the critic's q(w; lambda) (Sec. 3.4): the filtered set, G*, marginals, factors, log q, samples.
+
+:class:`CriticReadout` holds the methods of :class:`~hubsgo_ppl.infer.critic.SubgoalCritic` that read
+the guide without training it. They use the critic's parameters (``_theta``, ``_coupling``), graph
+(``graph``, ``names``, ``n``, ``_edge_index``), settings (``config``), generator (``_generator``) and
+samples (``_chains``, ``_last_samples``); none of them moves the parameters.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+
+from ..distributions.mh_kernels import run_chains
+from ..distributions.mrf import EXACT_LIMIT, PairwiseMRF
+
+__all__ = ["CriticReadout", "unique_rows", "RANKING_DRAWS", "MARGINAL_CHAINS", "INDEPENDENT_BURN_IN_FACTOR",
+           "NEAR_TIE_STANDARD_ERRORS"]
+
+RANKING_DRAWS = 10_000  # independent draws behind G* (standard error of a probability <= 0.005)
+MARGINAL_CHAINS = 4096  # fresh chains behind the marginals above exact_max_n before any update
+# burn-in of a fresh chain whose end is one independent draw, as a multiple of the update's burn-in
+# (which continues persistent chains instead of starting from random bits)
+INDEPENDENT_BURN_IN_FACTOR = 4
+NEAR_TIE_STANDARD_ERRORS = 2  # a G* entry this many standard errors from the top one is a near tie
+_MAX_CODE_BITS = 62  # rows up to this width are counted as int64 codes in unique_rows
+
+
+def unique_rows(w: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """``torch.unique(w, dim=0, return_counts=True)`` for 0/1 rows ``(S, N)``: the distinct rows in
+    lexicographic order and their counts. Up to N = 62 the rows are read as big-endian integers and
+    counted with a 1-D unique (the same order, ~10x faster on a critic's 64 samples)."""
+    n = w.shape[-1]
+    if n > _MAX_CODE_BITS or w.device.type != "cpu" or w.dim() != 2:
+        return torch.unique(w, dim=0, return_counts=True)
+    shifts = np.arange(n - 1, -1, -1, dtype=np.int64)
+    codes, counts = np.unique((w.detach().numpy().astype(np.int64) << shifts).sum(-1), return_counts=True)
+    configs = torch.from_numpy(((codes[:, None] >> shifts) & 1).astype(np.float32)).to(w.dtype)
+    return configs, torch.from_numpy(counts)
+
+
+class CriticReadout:
+    """The critic's readers (a mixin of :class:`~hubsgo_ppl.infer.critic.SubgoalCritic`)."""
+
+    _unique: tuple | None = None  # (samples, configs, counts): _sample_counts' cache
+
+    def last_samples(self) -> torch.Tensor:
+        """The S samples drawn by the last update, (S, N)."""
+        if self._last_samples is None:
+            raise RuntimeError("no update has run yet; call update() first")
+        return self._last_samples.clone()
+
+    def filtered_set(self, given: torch.Tensor | None = None) -> torch.Tensor:
+        """Sec. 3.4: the most frequent configuration among the last update's samples, BoolTensor (N,).
+
+        ``given`` (bool, (N,) or (B, N)) conditions on sub-goals already achieved: the most frequent
+        configuration among the samples with ``w_i = 1`` for every given ``i``, i.e. the mode of the
+        samples from q(w | w_given = 1). Where no sample agrees with a row, that row gets the
+        unconditional mode. The result has ``given``'s shape. Before the first update the samples are
+        the current chain states. Ties go to the lexicographically smallest configuration.
+        """
+        _, configs, counts = self._sample_counts()
+        mode = int(counts.argmax())
+        if given is None:
+            return configs[mode].bool()
+        given = torch.as_tensor(given, dtype=torch.bool)
+        if given.shape[-1] != self.n or given.dim() not in (1, 2):
+            raise ValueError(f"given must have shape ({self.n},) or (B, {self.n}), got {tuple(given.shape)}")
+        rows = given.reshape(-1, self.n)
+        agree = (configs.bool()[None] | ~rows[:, None]).all(-1)                 # (B, U)
+        best = torch.where(agree, counts[None], torch.zeros_like(counts)[None]).argmax(-1)
+        best = torch.where(agree.any(-1), best, torch.full_like(best, mode))
+        return configs[best].bool().reshape(given.shape)
+
+    def _sample_counts(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``(samples, configs, counts)``: the distinct configurations among the last update's samples
+        (the chain states before any update), in lexicographic order, and how often each occurs.
+        Cached until the samples change."""
+        samples = self._last_samples if self._last_samples is not None else self._chains
+        if self._unique is None or self._unique[0] is not samples:     # new samples replace the tensor
+            self._unique = (samples, *unique_rows(samples))
+        return self._unique
+
+    def distribution(self, exact_max_n: int | None = None) -> PairwiseMRF:
+        """The current q(w; lambda) as a detached :class:`PairwiseMRF`."""
+        return PairwiseMRF(
+            self._theta.detach().clone(),
+            self._coupling.detach().clone(),
+            self._edge_index,
+            burn_in=self.config.burn_in,
+            kernel=self.config.kernel,
+            generator=self._generator,
+            exact_max_n=self.config.exact_max_n if exact_max_n is None else exact_max_n,
+        )
+
+    def sample(self, num_samples: int, num_chains: int = 1, burn_in: int | None = None) -> torch.Tensor:
+        """Fresh chains from random bits: ``burn_in`` sweeps, then one sample per sweep.
+
+        Returns ``(num_chains, num_samples, N)``; uses (and advances) the critic's generator.
+        """
+        return run_chains(
+            self._theta.detach(),
+            self._coupling.detach(),
+            self._edge_index,
+            num_chains=num_chains,
+            num_steps=num_samples,
+            kernel=self.config.kernel,
+            generator=self._generator,
+            burn_in=self.config.burn_in if burn_in is None else burn_in,
+        )
+
+    def _independent_draws(self, num_draws: int, burn_in: int | None = None) -> torch.Tensor:
+        """``num_draws`` independent samples (num_draws, N): the end of one fresh chain each, after
+        ``burn_in`` sweeps (default :data:`INDEPENDENT_BURN_IN_FACTOR` x the config's)."""
+        if burn_in is None:
+            burn_in = INDEPENDENT_BURN_IN_FACTOR * self.config.burn_in
+        return self.sample(1, num_chains=num_draws, burn_in=burn_in)[:, 0]
+
+    def ranking(self, num_samples: int = RANKING_DRAWS, top_k: int = 5, burn_in: int | None = None) -> list[dict]:
+        """G* (Sec. 3.4): rank configurations by empirical probability over ``num_samples`` draws.
+
+        Each draw is the end of its own chain (``burn_in`` sweeps, default
+        :data:`INDEPENDENT_BURN_IN_FACTOR` x the config's), so the draws are independent. ``near_tie``
+        marks entries whose probability is within :data:`NEAR_TIE_STANDARD_ERRORS` standard errors of
+        the top one's (the top entry too, if it has such a rival). ``exact_prob`` is the enumerated q(w)
+        for N <= 20, else None.
+        """
+        if num_samples < 1 or top_k < 1:
+            raise ValueError(f"need num_samples >= 1 and top_k >= 1, got {num_samples}, {top_k}")
+        draws = self._independent_draws(num_samples, burn_in)
+        configs, counts = torch.unique(draws, dim=0, return_counts=True)
+        order = torch.argsort(counts, descending=True, stable=True)[:top_k]
+        probs = counts[order].double() / num_samples
+        exact = None
+        if self.n <= EXACT_LIMIT:
+            exact = self.distribution(exact_max_n=EXACT_LIMIT).log_prob(configs[order]).exp().tolist()
+        top = float(probs[0])
+
+        def close(p: float) -> bool:
+            se = math.sqrt((top * (1 - top) + p * (1 - p)) / num_samples)
+            return top - p <= NEAR_TIE_STANDARD_ERRORS * se
+
+        ties = [close(float(p)) for p in probs]
+        ties[0] = any(ties[1:])
+        out = []
+        for j, idx in enumerate(order.tolist()):
+            mask = configs[idx].long().tolist()
+            out.append(
+                {
+                    "subgoals": [name for name, m in zip(self.names, mask) if m],
+                    "mask": mask,
+                    "prob": float(probs[j]),
+                    "exact_prob": None if exact is None else float(exact[j]),
+                    "near_tie": bool(ties[j]),
+                }
+            )
+        return out
+
+    def marginals(self) -> torch.Tensor:
+        """P(w_i = 1): exact up to N = ``exact_max_n``; above it, the mean of the S samples the last update
+        drew (no extra sampling, so a diagnostic read costs nothing next to an update; standard error
+        at most 0.5 / sqrt(S)). Before any update, the mean of :data:`MARGINAL_CHAINS` independent draws."""
+        if self.n <= self.config.exact_max_n:
+            return self.distribution(exact_max_n=EXACT_LIMIT).marginals()
+        if self._last_samples is not None:
+            return self._last_samples.mean(0)
+        return self._independent_draws(MARGINAL_CHAINS).mean(0)
+
+    def factors(self) -> dict[str, dict]:
+        """The guide's factors: ``{"unary": {name: theta}, "pairwise": {(u, v): J_uv}}``."""
+        theta = self._theta.detach().tolist()
+        coupling = self._coupling.detach().tolist()
+        return {
+            "unary": dict(zip(self.names, theta)),
+            "pairwise": {(u, v): c for (u, v, _), c in zip(self.graph.edges, coupling)},
+        }
+
+    def log_q(self, w: torch.Tensor) -> torch.Tensor:
+        """log q(w; lambda): normalised for N <= 20, else unnormalised (lacks -log Z)."""
+        return self.distribution(exact_max_n=min(self.n, EXACT_LIMIT)).log_prob(torch.as_tensor(w, dtype=torch.float32))
