@@ -139,7 +139,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def cmd_review(args: argparse.Namespace) -> int:
-    from .experiments.review import review
+    from .diagnostics.review import review
 
     out = Path(args.out) if args.out else Path(args.run_dir) / "review"
     r = review(args.run_dir, threshold=args.threshold, out=out, gif=not args.no_gif, dead_band=args.dead_band,
@@ -172,7 +172,7 @@ def cmd_review(args: argparse.Namespace) -> int:
 
 def cmd_render(args: argparse.Namespace) -> int:
     from .diagnostics.render import render_episode
-    from .experiments.review import format_chosen
+    from .diagnostics.review import format_chosen
 
     r = render_episode(args.run_dir, args.out, seed=args.seed, tile_size=args.tile_size, fps=args.fps)
     outcome = "success" if r["success"] else "no success"

@@ -21,7 +21,7 @@ Usage::
     hubsgo review runs/keydoor-hubsgo-s0                   # writes runs/keydoor-hubsgo-s0/review/
     hubsgo review runs/keydoor-hubsgo-s0 --threshold 0.3 --out reviews/kd --no-gif
 
-    from hubsgo_ppl.experiments.review import review
+    from hubsgo_ppl.diagnostics.review import review
     result = review("runs/keydoor-hubsgo-s0", threshold=0.2)      # the content of review.json
 
 Into ``RUN/review/`` (or ``--out``), each file written atomically: ``review.json`` (for programs; it
@@ -42,9 +42,9 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from .io import write_json, write_text
-from .logger import read_csv_rows
-from .run import RunError, load_run
+from ..experiments.io import write_json, write_text
+from ..experiments.logger import read_csv_rows
+from ..experiments.run import RunError, load_run
 
 __all__ = ["review", "compare_couplings", "human_edge_signs", "suggested_drops", "marginal_trend",
            "achieved_frequencies", "metrics_summary", "render_markdown", "plot_review_graph", "format_chosen", "DEAD_BAND", "REVIEW_FORMAT"]
@@ -185,7 +185,7 @@ def review(run_dir: str | Path, threshold: float = 0.2, out: str | Path | None =
     """Review the HUBS-GO run in ``run_dir`` (see the module docstring) and write ``review.json``,
     ``review.md``, ``mrf_graph.png`` and (mazes, ``gif=True``) ``episode.gif`` into ``out`` (default
     ``RUN/review``). Returns the content of review.json. ``seed``: the GIF's evaluation seed."""
-    from ..diagnostics.render import read_run_config
+    from .render import read_run_config
 
     _check_args(threshold, top_k, num_samples, last)
     run_dir = Path(run_dir)
@@ -244,7 +244,7 @@ def _review(run_dir: Path, resolved: dict[str, Any], env: Any, agent: Any, thres
     out.mkdir(parents=True, exist_ok=True)
     plot_review_graph(result, out / "mrf_graph.png")
     if resolved.get("family") == "minigrid" and gif:
-        from ..diagnostics.render import annotate_frames, episode_summary, record_episode, write_gif
+        from .render import annotate_frames, episode_summary, record_episode, write_gif
 
         rec = record_episode(resolved, env, agent, seed=seed)
         write_gif(annotate_frames(rec), out / "episode.gif")
@@ -263,8 +263,8 @@ def plot_review_graph(r: dict[str, Any], path: Path) -> Path:
     import networkx as nx
     from matplotlib.lines import Line2D
 
-    from ..diagnostics.plots import mrf_graph_figure
-    from .io import atomic_path
+    from .plots import mrf_graph_figure
+    from ..experiments.io import atomic_path
 
     names = r["names"]
     marg = np.clip(np.array([r["marginals"][n] for n in names], dtype=float), 0.0, 1.0)

@@ -10,7 +10,7 @@ import torch
 from hubsgo_ppl.cli import main
 from hubsgo_ppl.experiments.io import load_checkpoint, save_torch
 from hubsgo_ppl.experiments.logger import read_csv_rows
-from hubsgo_ppl.experiments.review import (compare_couplings, format_chosen, human_edge_signs, marginal_trend,
+from hubsgo_ppl.diagnostics.review import (compare_couplings, format_chosen, human_edge_signs, marginal_trend,
                                            review, suggested_drops)
 from hubsgo_ppl.experiments.run import RunConfig, RunError, load_run, train
 
@@ -198,7 +198,7 @@ def test_compare_couplings_flags_exactly_the_contradicting_signs():
 
 
 def test_metrics_summary_reads_visited_columns_when_logged(tmp_path):
-    from hubsgo_ppl.experiments.review import metrics_summary
+    from hubsgo_ppl.diagnostics.review import metrics_summary
 
     path = tmp_path / "metrics.csv"
     path.write_text("episode,env_steps,success,return,visited/a,visited/b\n"
