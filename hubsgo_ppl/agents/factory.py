@@ -14,43 +14,34 @@ new agent is added by adding an entry here.
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any, Callable
 
 import gymnasium as gym
 import numpy as np
 import torch
 
+from .config import HIERARCHICAL, make_config
 from .filters import CriticFilter, NoFilter
 from .high_level import HighLevelConfig, HighLevelDQN
 from .loop import HRLLoop, LoopConfig
 from .low_level import GoalDQN, GoalDQNConfig, ScriptedLowLevel
+from .protocols import LowLevel
+from .seeding import HIGH_LEVEL_STREAM, LOW_LEVEL_STREAM, NET_INIT_STREAM, stream_generator, stream_rng
 
 __all__ = ["BUILDERS", "build_agent", "agent_names", "HIERARCHICAL"]
 
-HIERARCHICAL = ("hubsgo", "hdqn")
-
-
-def _dc(cls, values: dict[str, Any], section: str):
-    names = {f.name for f in dataclasses.fields(cls)}
-    unknown = set(values) - names
-    if unknown:
-        raise ValueError(f"unknown {section} setting(s) {sorted(unknown)}; known: {sorted(names)}")
-    values = {k: tuple(v) if isinstance(v, list) else v for k, v in values.items()}
-    return cls(**values)
-
 
 def _low_level(kind: str, env: gym.Env, n_goals: int, low_cfg: dict, gen: torch.Generator,
-               rng: np.random.Generator):
+               rng: np.random.Generator) -> LowLevel:
     obs_dim = int(np.prod(env.observation_space.shape))
     if kind == "learned" and isinstance(env.action_space, gym.spaces.Discrete):
         potential = getattr(env.unwrapped, "subgoal_potential", lambda: None)()
-        return GoalDQN(obs_dim, n_goals, int(env.action_space.n), _dc(GoalDQNConfig, low_cfg, "low"), gen, rng,
-                       potential=potential)
+        return GoalDQN(obs_dim, n_goals, int(env.action_space.n), make_config("low", GoalDQNConfig, low_cfg), gen,
+                       rng, potential=potential)
     if kind == "scripted":
         from .scripted_osc import ScriptedOSC
 
-        return ScriptedLowLevel(ScriptedOSC(**low_cfg))
+        return ScriptedLowLevel(make_config("low", ScriptedOSC, low_cfg))
     if kind == "learned":
         from .td3_her import GoalTD3
 
@@ -61,12 +52,12 @@ def _low_level(kind: str, env: gym.Env, n_goals: int, low_cfg: dict, gen: torch.
 def build_hierarchical(agent: str, env: gym.Env, cfg: dict[str, Any], seed: int, critic: Any = None) -> HRLLoop:
     names = list(env.unwrapped.subgoal_names)
     n = len(names)
-    gen = torch.Generator().manual_seed(int(np.random.SeedSequence([seed, 1]).generate_state(1)[0]))
-    high_rng = np.random.default_rng(np.random.SeedSequence([seed, 2]))
-    low_rng = np.random.default_rng(np.random.SeedSequence([seed, 3]))
+    gen = stream_generator(seed, NET_INIT_STREAM)
+    high_rng = stream_rng(seed, HIGH_LEVEL_STREAM)
+    low_rng = stream_rng(seed, LOW_LEVEL_STREAM)
     obs_dim = int(np.prod(env.observation_space.shape))
-    loop_cfg = _dc(LoopConfig, {**cfg.get("loop", {}), "total_steps": int(cfg["steps"])}, "loop")
-    high = HighLevelDQN(obs_dim, n, _dc(HighLevelConfig, cfg.get("high", {}), "high"), gen, high_rng)
+    loop_cfg = make_config("loop", LoopConfig, cfg.get("loop", {}), total_steps=int(cfg["steps"]))
+    high = HighLevelDQN(obs_dim, n, make_config("high", HighLevelConfig, cfg.get("high", {})), gen, high_rng)
     low = _low_level(cfg.get("low_level", "learned"), env, n, cfg.get("low", {}), gen, low_rng)
     if agent == "hubsgo":
         if critic is None:

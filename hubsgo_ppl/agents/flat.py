@@ -10,8 +10,9 @@ Three things SB3 does not give us, and how this module supplies them:
   (replay sampling, ε-greedy, action noise, PPO's sampling). Every SB3 call runs inside
   :meth:`SB3Trainer._sandbox`, which swaps in this trainer's own global-RNG states and swaps the
   caller's back afterwards; the states are part of the checkpoint. Training episodes are seeded with
-  :func:`~hubsgo_ppl.agents.loop.episode_seed` by :class:`SeededEpisodes`.
-- **Checkpoints of plain data** (SB3 issues #171/#172/#1122: pickled schedules). We store SB3's
+  :func:`~hubsgo_ppl.agents.seeding.episode_seed` by :class:`SeededEpisodes`.
+- **Checkpoints of plain data** (SB3's own saves pickle objects such as learning-rate schedules, which
+  break across versions and run code on load). We store SB3's
   ``get_parameters()`` (policy and optimiser ``state_dict``s), the filled part of the replay buffer as
   arrays, the counters and the RNG states; never the model object.
 - **Exact resume mid-episode.** A chunk ends on an SB3 training boundary (a whole ``train_freq`` unit,
@@ -41,7 +42,8 @@ from stable_baselines3.common.noise import NormalActionNoise
 from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from .loop import EpisodeStats, episode_seed
+from .episode import EpisodeStats, EpisodeTally, reset_episode
+from .seeding import SB3_EVAL_EPISODE, SB3_STREAM, stream_seed
 
 __all__ = ["DoubleDQN", "SeededEpisodes", "SB3Trainer", "SB3Config", "build_dqn", "build_ddqn", "build_ppo",
            "build_td3"]
@@ -90,23 +92,23 @@ class SeededEpisodes(gym.Wrapper):
         self.started = 0                   # training episodes reset so far
         self.steps = 0                     # training env steps so far
         self.actions: list[np.ndarray] = []
-        self.ret, self.success = 0.0, False
+        self.tally = EpisodeTally(0)       # the open episode (its success counts from the steps)
         self.finished: list[tuple[float, int, bool, int]] = []
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        obs, info = self.env.reset(seed=episode_seed(self.run_seed, self.started), options=options)
+        obs, info = reset_episode(self.env, self.run_seed, self.started, options=options)
+        self.tally = EpisodeTally(self.started)
         self.started += 1
-        self.actions, self.ret, self.success = [], 0.0, False
+        self.actions = []
         return obs, info
 
     def step(self, action):
         obs, reward, terminated, truncated, info = self.env.step(action)
         self.actions.append(np.array(action, copy=True))
-        self.ret += float(reward)
-        self.success = self.success or bool(info.get("is_success", False))
+        self.tally.step(reward, info)
         self.steps += 1
         if terminated or truncated:
-            self.finished.append((self.ret, len(self.actions), self.success, self.steps))
+            self.finished.append((self.tally.ret, len(self.actions), self.tally.success, self.steps))
         return obs, reward, terminated, truncated, info
 
     def replay(self, episode: int, actions: list[np.ndarray], steps_before: int) -> np.ndarray:
@@ -157,7 +159,7 @@ class SB3Trainer:
         self.vec_env = DummyVecEnv([lambda: self.wrapper])
         self._rng: dict[str, Any] | None = None
         self._dirty = False                # an evaluation used the env since the last training step
-        sb3_seed = int(np.random.SeedSequence([self.seed, 11]).generate_state(1)[0] % (2**31))
+        sb3_seed = stream_seed(self.seed, SB3_STREAM) % (2**31)
         with self._sandbox():
             # SB3 seeds the (sandboxed) global RNGs and the action space from ``seed`` and draws its
             # initial weights from them
@@ -249,19 +251,18 @@ class SB3Trainer:
             raise ValueError("SB3 baselines train through train_chunk(); run_episode is evaluation only")
         env = self.wrapper.env
         self._dirty = True
-        obs, info = env.reset(seed=episode_seed(self.seed, 10**6) if seed is None else seed)
-        ret, length, success, done = 0.0, 0, bool(info.get("is_success", False)), False
+        obs, info = reset_episode(env, self.seed, SB3_EVAL_EPISODE, seed)
+        tally = EpisodeTally(self.episodes)
+        tally.note(info)                        # a success reported on reset counts
+        done = False
         while not done:
             action, _ = self.model.predict(obs, deterministic=True)
             if isinstance(env.action_space, gym.spaces.Discrete):
                 action = int(action)
             obs, reward, terminated, truncated, info = env.step(action)
-            ret += float(reward)
-            length += 1
-            success = success or bool(info.get("is_success", False))
+            tally.step(reward, info)
             done = terminated or truncated
-        return EpisodeStats(episode=self.episodes, env_steps=self.env_steps, ret=ret, length=length,
-                            success=success, options=1, explore_eps=0.0, filter_eps=0.0)
+        return tally.stats(self.env_steps, options=1, explore_eps=0.0, filter_eps=0.0)
 
     # -- checkpointing (plain data only) --------------------------------------------------------------
     def state_dict(self) -> dict[str, Any]:

@@ -27,6 +27,7 @@ from typing import Any, Callable
 
 import numpy as np
 import torch
+from stable_baselines3.common.utils import polyak_update
 from torch import nn
 
 from ..infer.critic import TDBatch
@@ -136,11 +137,8 @@ class HighLevelDQN:
                                discount=b["discount"], available=avail)
         return {"high/td_loss": loss.item()}, batch
 
-    @torch.no_grad()
     def _soft_update(self) -> None:
-        tau = self.cfg.target_tau
-        for p, pt in zip(self.q.parameters(), self.q_target.parameters()):
-            pt.mul_(1 - tau).add_(p, alpha=tau)
+        polyak_update(self.q.parameters(), self.q_target.parameters(), self.cfg.target_tau)
 
     def state_dict(self) -> dict[str, Any]:
         return {"q": self.q.state_dict(), "q_target": self.q_target.state_dict(),

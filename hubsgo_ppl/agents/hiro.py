@@ -15,25 +15,27 @@ A baseline of the paper's Sec. 4.2 that learns its own sub-goals instead of choo
   around it, that maximises the *current* low level's log-likelihood of the actions actually taken,
   ``Σ_i log π_lo(a_i | s_i, g̃_i)`` with ``g̃_i`` rolled forward by ``h`` from the candidate (for the
   deterministic TD3 low level, the Gaussian surrogate ``-½||a_i - μ(s_i, g̃_i)||²``). Rolling the goal
-  forward is the step public ports get wrong (watakandai/hiro_pytorch issue #2): see
+  forward is the step public ports tend to get wrong (they score every step against the initial goal): see
   :func:`goal_sequence` and the constructed test in ``tests/agents/test_hiro.py``.
 """
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 from typing import Any, Callable
 
 import gymnasium as gym
 import numpy as np
 import torch
-from torch import nn
+from stable_baselines3.common.utils import polyak_update
 from torch.nn import functional as F
 
 from .buffers import ReplayBuffer
-from .loop import EpisodeStats, episode_seed
+from .config import make_config
+from .episode import EpisodeStats, EpisodeTally, reset_episode
 from .nets import mlp
+from .seeding import HIRO_STREAM, seed_sequence
+from .td3 import TD3Core, TD3Step
 
 __all__ = ["HIROConfig", "GoalSpace", "goal_space_for", "goal_sequence", "candidate_goals",
            "off_policy_correction", "TD3Core", "GoalDQNLow", "GoalTD3Low", "HIRO", "build_hiro"]
@@ -62,6 +64,10 @@ class HIROConfig:
     policy_noise: float = 0.2           # TD3 target smoothing
     noise_clip: float = 0.5
     policy_delay: int = 2
+
+    def __post_init__(self) -> None:
+        if self.c <= 0 or self.batch_size <= 0 or self.temperature <= 0:
+            raise ValueError("hiro.c, hiro.batch_size and hiro.temperature must be positive")
 
 
 # -- goal space ---------------------------------------------------------------------------------------
@@ -154,67 +160,32 @@ def off_policy_correction(log_lik: Callable[[torch.Tensor, torch.Tensor, torch.T
 
 # -- learners ------------------------------------------------------------------------------------------
 
-
-def _soft_update(net: nn.Module, target: nn.Module, tau: float) -> None:
-    with torch.no_grad():
-        for p, pt in zip(net.parameters(), target.parameters()):
-            pt.mul_(1 - tau).add_(p, alpha=tau)
+#: HIRO's checkpoint names of the TD3 core's networks and optimisers
+_TD3_KEYS = {"actor": "actor", "critics": "critics", "actor_target": "actor_t", "critics_target": "critics_t",
+             "actor_opt": "opt_actor", "critic_opt": "opt_critic"}
 
 
-class TD3Core:
-    """Deterministic actor ``tanh(·) * scale`` and twin critics (Fujimoto et al. 2018); plain tensors in/out."""
+def _td3(in_dim: int, out_dim: int, scale: np.ndarray, cfg: HIROConfig, gen: torch.Generator) -> TD3Core:
+    """HIRO's TD3: actions in ``[-scale, scale]``, one learning rate."""
+    return TD3Core(in_dim, out_dim, cfg.hidden, gen, actor_lr=cfg.lr, critic_lr=cfg.lr, tau=cfg.tau,
+                   policy_delay=cfg.policy_delay, target_noise=cfg.policy_noise, target_noise_clip=cfg.noise_clip,
+                   scale=scale)
 
-    def __init__(self, in_dim: int, out_dim: int, scale: np.ndarray, cfg: HIROConfig, gen: torch.Generator):
-        self.cfg = cfg
-        self.scale = torch.as_tensor(scale, dtype=torch.float32)
-        self.actor = mlp(in_dim, cfg.hidden, out_dim, gen)
-        self.critics = nn.ModuleList([mlp(in_dim + out_dim, cfg.hidden, 1, gen) for _ in range(2)])
-        self.actor_t = mlp(in_dim, cfg.hidden, out_dim, gen)
-        self.critics_t = nn.ModuleList([mlp(in_dim + out_dim, cfg.hidden, 1, gen) for _ in range(2)])
-        self.actor_t.load_state_dict(self.actor.state_dict())
-        self.critics_t.load_state_dict(self.critics.state_dict())
-        self.opt_actor = torch.optim.Adam(self.actor.parameters(), lr=cfg.lr)
-        self.opt_critic = torch.optim.Adam(self.critics.parameters(), lr=cfg.lr)
-        self.updates = 0
 
-    def mu(self, x: torch.Tensor, target: bool = False) -> torch.Tensor:
-        return torch.tanh((self.actor_t if target else self.actor)(x)) * self.scale
+def _td3_state(core: TD3Core) -> dict[str, Any]:
+    return core.state_dict(_TD3_KEYS) | {"updates": core.updates}
 
-    def _q(self, nets: nn.ModuleList, x: torch.Tensor, a: torch.Tensor) -> list[torch.Tensor]:
-        xa = torch.cat([x, a / self.scale], -1)
-        return [n(xa).squeeze(-1) for n in nets]
 
-    def update(self, x, a, r, x2, discount, noise: torch.Tensor) -> dict[str, float]:
-        """One TD3 step; ``noise`` is standard-normal, drawn by the caller's generator."""
-        with torch.no_grad():
-            eps = (noise * self.cfg.policy_noise).clamp(-self.cfg.noise_clip, self.cfg.noise_clip) * self.scale
-            a2 = torch.max(torch.min(self.mu(x2, target=True) + eps, self.scale), -self.scale)
-            y = r + discount * torch.min(*self._q(self.critics_t, x2, a2))
-        q1, q2 = self._q(self.critics, x, a)
-        critic_loss = F.mse_loss(q1, y) + F.mse_loss(q2, y)
-        self.opt_critic.zero_grad()
-        critic_loss.backward()
-        self.opt_critic.step()
-        out = {"critic_loss": critic_loss.item()}
-        self.updates += 1
-        if self.updates % self.cfg.policy_delay == 0:
-            actor_loss = -self._q(self.critics[:1], x, self.mu(x))[0].mean()
-            self.opt_actor.zero_grad()
-            actor_loss.backward()
-            self.opt_actor.step()
-            _soft_update(self.actor, self.actor_t, self.cfg.tau)
-            _soft_update(self.critics, self.critics_t, self.cfg.tau)
-            out["actor_loss"] = actor_loss.item()
-        return out
+def _load_td3_state(core: TD3Core, s: dict[str, Any]) -> None:
+    core.load_state_dict(s, _TD3_KEYS)
+    core.updates = int(s["updates"])
 
-    def state_dict(self) -> dict[str, Any]:
-        return {k: getattr(self, k).state_dict() for k in
-                ("actor", "critics", "actor_t", "critics_t", "opt_actor", "opt_critic")} | {"updates": self.updates}
 
-    def load_state_dict(self, s: dict[str, Any]) -> None:
-        for k in ("actor", "critics", "actor_t", "critics_t", "opt_actor", "opt_critic"):
-            getattr(self, k).load_state_dict(s[k])
-        self.updates = int(s["updates"])
+def _td3_stats(step: TD3Step) -> dict[str, float]:
+    out = {"critic_loss": step.critic_loss}
+    if step.actor_loss is not None:
+        out["actor_loss"] = step.actor_loss
+    return out
 
 
 class GoalDQNLow:
@@ -255,7 +226,7 @@ class GoalDQNLow:
         self.opt.zero_grad()
         loss.backward()
         self.opt.step()
-        _soft_update(self.q, self.q_t, self.cfg.tau)
+        polyak_update(self.q.parameters(), self.q_t.parameters(), self.cfg.tau)
         return {"td_loss": loss.item()}
 
     def state_dict(self) -> dict[str, Any]:
@@ -279,7 +250,7 @@ class GoalTD3Low:
         self.cfg = cfg
         self.gscale = torch.as_tensor(goal_scale, dtype=torch.float32)
         self.ascale = np.asarray(action_space.high, dtype=np.float32)
-        self.td3 = TD3Core(obs_dim + len(goal_scale), int(np.prod(action_space.shape)), self.ascale, cfg, gen)
+        self.td3 = _td3(obs_dim + len(goal_scale), int(np.prod(action_space.shape)), self.ascale, cfg, gen)
 
     def _in(self, obs: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
         return torch.cat([obs, goal / self.gscale], -1)
@@ -296,14 +267,15 @@ class GoalTD3Low:
         return np.clip(a, -self.ascale, self.ascale).astype(np.float32)
 
     def update(self, b: dict[str, torch.Tensor], noise: torch.Tensor) -> dict[str, float]:
-        return self.td3.update(self._in(b["obs"], b["goal"]), b["action"], b["reward"],
-                               self._in(b["next_obs"], b["next_goal"]), self.cfg.gamma_low * (1 - b["done"]), noise)
+        return _td3_stats(self.td3.update(self._in(b["obs"], b["goal"]), b["action"], b["reward"],
+                                          self._in(b["next_obs"], b["next_goal"]),
+                                          self.cfg.gamma_low * (1 - b["done"]), noise))
 
     def state_dict(self) -> dict[str, Any]:
-        return self.td3.state_dict()
+        return _td3_state(self.td3)
 
     def load_state_dict(self, s: dict[str, Any]) -> None:
-        self.td3.load_state_dict(s)
+        _load_td3_state(self.td3, s)
 
 
 # -- the agent ---------------------------------------------------------------------------------------------
@@ -314,17 +286,17 @@ class HIRO:
 
     HIRO runs its own training loop, not :class:`~hubsgo_ppl.agents.loop.HRLLoop`: its high level emits
     continuous goals every ``c`` steps instead of choosing from a sub-goal catalogue, so it has no
-    options that end on a sub-goal predicate and no filter. It reuses only the loop's
-    :class:`EpisodeStats` and :func:`episode_seed`."""
+    options that end on a sub-goal predicate and no filter. It shares with the loop only the episode
+    skeleton of :mod:`.episode`."""
 
     def __init__(self, env: gym.Env, cfg: HIROConfig, seed: int):
         self.env, self.cfg, self.seed = env, cfg, int(seed)
         self.goals = goal_space_for(env, cfg.goal_scale)
-        ss = np.random.SeedSequence([self.seed, 21])
+        ss = seed_sequence(self.seed, HIRO_STREAM)
         gen = torch.Generator().manual_seed(int(ss.generate_state(1)[0]))
         self.rng = np.random.default_rng(ss.spawn(1)[0])
         obs_dim, k, c = int(np.prod(env.observation_space.shape)), self.goals.dim, cfg.c
-        self.high = TD3Core(obs_dim, k, self.goals.scale, cfg, gen)
+        self.high = _td3(obs_dim, k, self.goals.scale, cfg, gen)
         if isinstance(env.action_space, gym.spaces.Discrete):
             self.low: GoalDQNLow | GoalTD3Low = GoalDQNLow(obs_dim, self.goals.scale, int(env.action_space.n), cfg, gen)
             act_shape, act_dtype = (), np.int64
@@ -366,18 +338,18 @@ class HIRO:
                                           torch.as_tensor(cands))
         self.relabelled[0] += len(idx)
         self.relabelled[1] += int((idx != 0).sum())
-        stats = self.high.update(b["obs"], goal, b["reward"], b["next_obs"], cfg.gamma_high * (1 - b["done"]),
-                                 self._noise(cfg.batch_size, self.goals.dim))
+        stats = _td3_stats(self.high.update(b["obs"], goal, b["reward"], b["next_obs"],
+                                            cfg.gamma_high * (1 - b["done"]), self._noise(cfg.batch_size, self.goals.dim)))
         return {f"high/{k}": v for k, v in stats.items()} | {"high/relabel_rate": float((idx != 0).float().mean())}
 
     def run_episode(self, train: bool = True, seed: int | None = None) -> EpisodeStats:
         env, cfg, c = self.env, self.cfg, self.cfg.c
-        ep = self.episodes
-        obs, info = env.reset(seed=episode_seed(self.seed, ep) if seed is None else seed)
+        obs, info = reset_episode(env, self.seed, self.episodes, seed)
+        tally = EpisodeTally(self.episodes, mean=np.mean)
+        tally.note(info)                        # HIRO counts a success reported on reset
         obs = np.asarray(obs, dtype=np.float32)
         ag = self.goals.achieved(obs)
-        ret, length, options, success, done = 0.0, 0, 0, bool(info.get("is_success", False)), False
-        sums: dict[str, list[float]] = {}
+        options, done = 0, False
         while not done:
             goal0 = self._high_goal(obs, train)
             g, s0, R = goal0.copy(), obs, 0.0
@@ -402,12 +374,9 @@ class HIRO:
                     if len(self.low_buf) >= max(cfg.low_learning_starts, cfg.batch_size):
                         stats = self.low.update(self.low_buf.sample(cfg.batch_size),
                                                 self._noise(cfg.batch_size, *self.act_shape))
-                        for k, v in stats.items():
-                            sums.setdefault(f"low/{k}", []).append(v)
+                        tally.record({f"low/{k}": v for k, v in stats.items()})
                 R += float(reward)
-                ret += float(reward)
-                length += 1
-                success = success or bool(info.get("is_success", False))
+                tally.step(reward, info)
                 obs, ag, g = next_obs, next_ag, next_g
                 if terminated or truncated:
                     break
@@ -417,26 +386,23 @@ class HIRO:
                 self.high_buf.add(obs=s0, goal=goal0, reward=R, next_obs=obs, done=float(terminated),
                                   seq_obs=seq_obs, seq_ag=seq_ag, seq_act=seq_act, mask=mask)
                 if len(self.high_buf) >= max(cfg.high_learning_starts, cfg.batch_size):
-                    for k, v in self._update_high().items():
-                        sums.setdefault(k, []).append(v)
+                    tally.record(self._update_high())
         if train:
             self.episodes += 1
-        return EpisodeStats(episode=ep, env_steps=self.env_steps, ret=ret, length=length, success=success,
-                            options=options, explore_eps=cfg.high_noise if train else 0.0, filter_eps=0.0,
-                            scalars={k: float(np.mean(v)) for k, v in sums.items()})
+        return tally.stats(self.env_steps, options, explore_eps=cfg.high_noise if train else 0.0, filter_eps=0.0)
 
     def train_chunk(self) -> list[EpisodeStats]:
         return [self.run_episode(train=True)]
 
     def state_dict(self) -> dict[str, Any]:
         return {"env_steps": self.env_steps, "episodes": self.episodes, "rng": self.rng.bit_generator.state,
-                "high": self.high.state_dict(), "low": self.low.state_dict(), "relabelled": list(self.relabelled),
+                "high": _td3_state(self.high), "low": self.low.state_dict(), "relabelled": list(self.relabelled),
                 "high_buf": self.high_buf.state_dict(), "low_buf": self.low_buf.state_dict()}
 
     def load_state_dict(self, s: dict[str, Any]) -> None:
         self.env_steps, self.episodes = int(s["env_steps"]), int(s["episodes"])
         self.rng.bit_generator.state = s["rng"]
-        self.high.load_state_dict(s["high"])
+        _load_td3_state(self.high, s["high"])
         self.low.load_state_dict(s["low"])
         self.high_buf.load_state_dict(s["high_buf"])
         self.low_buf.load_state_dict(s["low_buf"])
@@ -445,13 +411,4 @@ class HIRO:
 
 def build_hiro(env: gym.Env, cfg: dict[str, Any], seed: int, critic: Any = None) -> HIRO:
     """Builder named in ``agents.factory.BUILDERS``; settings from the preset's ``hiro`` section."""
-    values = dict(cfg.get("hiro", {}))
-    names = {f.name for f in dataclasses.fields(HIROConfig)} - {"total_steps"}
-    unknown = set(values) - names
-    if unknown:
-        raise ValueError(f"unknown hiro setting(s) {sorted(unknown)}; known: {sorted(names)}")
-    values = {k: tuple(v) if isinstance(v, list) else v for k, v in values.items()}
-    hc = HIROConfig(**values, total_steps=int(cfg["steps"]))
-    if hc.c <= 0 or hc.batch_size <= 0 or hc.temperature <= 0:
-        raise ValueError("hiro.c, hiro.batch_size and hiro.temperature must be positive")
-    return HIRO(env, hc, seed)
+    return HIRO(env, make_config("hiro", HIROConfig, cfg.get("hiro", {}), total_steps=int(cfg["steps"])), seed)

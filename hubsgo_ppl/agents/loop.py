@@ -18,7 +18,7 @@ per-episode statistics and leaves logging, progress bars and checkpoints to ``ex
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import dataclass, fields
 from typing import Any
 
 import gymnasium as gym
@@ -26,9 +26,11 @@ import numpy as np
 import torch
 
 from ..infer.tdbatch import TDBatch
-from .filters import SubgoalFilter
+from .episode import EpisodeStats, EpisodeTally, reset_episode
 from .high_level import HighLevelDQN
+from .protocols import LowLevel, SubgoalFilter
 from .schedules import LinearSchedule
+from .seeding import LOOP_STREAM, episode_seed, stream_rng
 
 __all__ = ["LoopConfig", "EpisodeStats", "HRLLoop", "episode_seed"]
 
@@ -97,42 +99,16 @@ class LoopConfig:
             raise ValueError(f"loop.critic_every must be a positive integer, got {self.critic_every!r}")
 
 
-@dataclass
-class EpisodeStats:
-    episode: int
-    env_steps: int                  # cumulative, after this episode
-    ret: float
-    length: int
-    success: bool
-    options: int
-    explore_eps: float
-    filter_eps: float
-    chosen: list[str] = field(default_factory=list)
-    scalars: dict[str, float] = field(default_factory=dict)   # means of update diagnostics
-
-    def row(self) -> dict[str, Any]:
-        d = asdict(self)
-        d.pop("chosen")
-        d.pop("scalars")
-        d["return"] = d.pop("ret")
-        d["success"] = int(self.success)
-        d.update(self.scalars)
-        return d
-
-
-def episode_seed(seed: int, episode: int) -> int:
-    """The env seed of episode ``episode`` of a run seeded ``seed`` (so resumed runs replay exactly)."""
-    return int(np.random.SeedSequence([seed, episode]).generate_state(1)[0])
-
-
 class HRLLoop:
-    def __init__(self, env: gym.Env, high: HighLevelDQN, low: Any, subgoal_filter: SubgoalFilter,
+    """Algorithm 1 on the trainer protocol (:class:`~.protocols.Trainer`): one training episode per chunk."""
+
+    def __init__(self, env: gym.Env, high: HighLevelDQN, low: LowLevel, subgoal_filter: SubgoalFilter,
                  config: LoopConfig, seed: int):
         self.env = env
         self.high, self.low, self.filter = high, low, subgoal_filter
         self.cfg = config
         self.seed = seed
-        self.rng = np.random.default_rng(np.random.SeedSequence([seed, 7]))
+        self.rng = stream_rng(seed, LOOP_STREAM)
         self.names: list[str] = list(env.unwrapped.subgoal_names)
         self.env_steps = 0
         self.episodes = 0
@@ -145,7 +121,7 @@ class HRLLoop:
         self._pending: list = []                # high-level minibatches waiting for the next critic update
         self._ghat: np.ndarray | None = None    # Ĝt as the loop sees it (refreshed per option or per episode)
         self._ghat_given: np.ndarray | None = None   # the achieved set Ĝt was last read with
-        self._break_cycles = (config.low_break_cycles and getattr(low, "learns", False)
+        self._break_cycles = (config.low_break_cycles and low.learns
                               and isinstance(env.action_space, gym.spaces.Discrete))
 
     # -- one episode ---------------------------------------------------------------------------------
@@ -190,20 +166,12 @@ class HRLLoop:
     def run_episode(self, train: bool = True, seed: int | None = None) -> EpisodeStats:
         """Run one episode (Algorithm 1). ``train=False`` is greedy evaluation: no exploration, no updates."""
         env, cfg = self.env, self.cfg
-        ep = self.episodes
-        obs, info = env.reset(seed=episode_seed(self.seed, ep) if seed is None else seed)
+        obs, info = reset_episode(env, self.seed, self.episodes, seed)
+        tally = EpisodeTally(self.episodes)     # the loop counts success from the steps, not the reset
         achieved = np.asarray(info["subgoals"], dtype=bool)
         visited = achieved.copy()                       # achieved at any step of the episode
-        ret, length, options, success = 0.0, 0, 0, False
+        options = 0
         chosen: list[str] = []
-        sums: dict[str, float] = {}
-        counts: dict[str, int] = {}
-
-        def record(d: dict[str, float] | None) -> None:
-            for k, v in (d or {}).items():
-                sums[k] = sums.get(k, 0.0) + v
-                counts[k] = counts.get(k, 0) + 1
-
         self._read_filter(achieved)     # with filter_refresh="episode", Ĝt holds until the achieved set changes
         greedy_at: set[tuple[int, bytes]] = set()   # (sub-goal, state) where the low level acted greedily
         revisits = 0
@@ -216,8 +184,7 @@ class HRLLoop:
             allowed = self._allowed(achieved, filter_eps)
             g = self.high.select(obs, allowed, explore)
             chosen.append(self.names[g])
-            if hasattr(self.low, "begin_option"):
-                self.low.begin_option()
+            self.low.begin_option()
             s0, R, k = obs, 0.0, 0
             terminated = truncated = False
             goal_explore = low_explore
@@ -230,16 +197,15 @@ class HRLLoop:
                     if key in greedy_at:
                         step_explore, revisits = 1.0, revisits + 1
                 action = self.low.act(obs, g, step_explore, env)
-                if key is not None and not getattr(self.low, "explored", True):
+                if key is not None and not self.low.explored:
                     greedy_at.add(key)
                 next_obs, reward, terminated, truncated, info = env.step(action)
                 next_achieved = np.asarray(info["subgoals"], dtype=bool)
                 if train and self.low.learns:
-                    record(self.low.observe(obs, action, next_obs, achieved, next_achieved, terminated))
+                    tally.record(self.low.observe(obs, action, next_obs, achieved, next_achieved, terminated))
                 R += (cfg.gamma ** k) * float(reward)
-                ret += float(reward)
+                tally.step(reward, info)
                 k += 1
-                length += 1
                 if train:
                     self.env_steps += 1
                     if reward > 0 and self.first_reward_step is None:
@@ -252,7 +218,6 @@ class HRLLoop:
             if train:
                 a = cfg.success_rate_alpha
                 self.success_rate[g] = (1 - a) * self.success_rate[g] + a * float(achieved[g])
-            success = success or bool(info.get("is_success", False))
             done = terminated or truncated
             if train:
                 available = ~achieved if (~achieved).any() else np.ones_like(achieved)
@@ -260,19 +225,17 @@ class HRLLoop:
                 self.high.store(s0, g, R, obs, discount, available)
                 if self.high.ready():
                     stats, batch = self.high.update(self._target_mask)
-                    record(stats)
+                    tally.record(stats)
                     self._pending.append(batch)
                     if len(self._pending) >= cfg.critic_every:
                         pooled, self._pending = TDBatch.cat(self._pending, cfg.critic_pool_weight), []
-                        record(self.filter.update(pooled))
+                        tally.record(self.filter.update(pooled))
         if train:
-            self.filter.end_episode(visited, success)
+            self.filter.end_episode(visited, tally.success)
             self.episodes += 1
             if self._break_cycles:
-                sums["low/revisits"], counts["low/revisits"] = float(revisits), 1
-        return EpisodeStats(episode=ep, env_steps=self.env_steps, ret=ret, length=length, success=success,
-                            options=options, explore_eps=explore, filter_eps=filter_eps, chosen=chosen,
-                            scalars={k: sums[k] / counts[k] for k in sums})
+                tally.put("low/revisits", float(revisits))
+        return tally.stats(self.env_steps, options, explore_eps=explore, filter_eps=filter_eps, chosen=chosen)
 
     def train_chunk(self) -> list[EpisodeStats]:
         """The trainer protocol used by ``experiments.run``: one training episode per call."""

@@ -9,23 +9,19 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
 import torch
+from stable_baselines3.common.utils import polyak_update
 from torch import nn
 
 from .buffers import ReplayBuffer
 from .nets import mlp
+from .protocols import Controller, LowLevel, LowLevelBase
 
-__all__ = ["LowLevel", "GoalDQNConfig", "GoalDQN", "ScriptedLowLevel"]
-
-
-class LowLevel(Protocol):
-    learns: bool
-
-    def act(self, obs: np.ndarray, goal: int, explore_eps: float, env: gym.Env) -> Any: ...
+__all__ = ["LowLevel", "LowLevelBase", "GoalDQNConfig", "GoalDQN", "ScriptedLowLevel"]
 
 
 @dataclass
@@ -44,7 +40,7 @@ class GoalDQNConfig:
     shaping: float = 0.0
 
 
-class GoalDQN:
+class GoalDQN(LowLevelBase):
     """Goal-conditioned DQN: Q(s, ·, ·) → (N goals × A actions); intrinsic reward 1 on achieving g."""
 
     learns = True
@@ -109,9 +105,7 @@ class GoalDQN:
         loss.backward()
         nn.utils.clip_grad_norm_(self.q.parameters(), self.cfg.grad_clip)
         self.opt.step()
-        with torch.no_grad():
-            for p, pt in zip(self.q.parameters(), self.q_target.parameters()):
-                pt.mul_(1 - self.cfg.target_tau).add_(p, alpha=self.cfg.target_tau)
+        polyak_update(self.q.parameters(), self.q_target.parameters(), self.cfg.target_tau)
         return {"low/td_loss": loss.item()}
 
     def state_dict(self) -> dict[str, Any]:
@@ -126,20 +120,18 @@ class GoalDQN:
         self.steps = int(s["steps"])
 
 
-class ScriptedLowLevel:
-    """The scripted OSC controller as a low level: moves to ``subgoal_target(g)``, actuates the gripper.
+class ScriptedLowLevel(LowLevelBase):
+    """A scripted controller (the OSC one of the arm tasks) as a low level: moves to
+    ``subgoal_target(g)``, actuates the gripper.
 
     It learns nothing (``learns = False``), so the loop never calls an update on it.
     """
 
-    learns = False
-
-    def __init__(self, controller: Any):
+    def __init__(self, controller: Controller):
         self.controller = controller
 
     def act(self, obs: np.ndarray, goal: int, explore_eps: float, env: gym.Env) -> np.ndarray:
         return self.controller.act(env.unwrapped, goal)
 
     def begin_option(self) -> None:
-        if hasattr(self.controller, "reset"):
-            self.controller.reset()
+        self.controller.reset()

@@ -1,4 +1,7 @@
-"""Default hyperparameters per task family, overridable from the CLI (``--set loop.option_steps=30``)."""
+"""Default hyperparameters per task family, overridable from the CLI (``--set loop.option_steps=30``).
+
+:func:`hubsgo_ppl.agents.config.resolve_hyper` merges them with a task's own settings and the
+overrides, and validates the result against the runtime settings classes."""
 
 from __future__ import annotations
 

@@ -32,6 +32,9 @@ class ScriptedOSC:
         self.gain = float(gain)
         self.tolerance = float(tolerance)
 
+    def reset(self) -> None:
+        """A new option starts: nothing to forget (the targets are re-read every step)."""
+
     def act(self, env, goal_index: int) -> np.ndarray:
         """Action (dx, dy, dz, gripper) in [-1, 1]^4, float32, for sub-goal ``goal_index``."""
         task = env.unwrapped

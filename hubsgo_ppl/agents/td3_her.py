@@ -24,19 +24,21 @@ trajectory) and written to the replay with their relabelled copies when the traj
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 import torch
+from stable_baselines3.common.running_mean_std import RunningMeanStd
 from torch import nn
 
 from .buffers import ReplayBuffer
-from .nets import mlp
+from .config import make_config
+from .protocols import LowLevelBase
+from .td3 import TD3Core
 
-__all__ = ["GoalTD3Config", "GoalTD3", "her_future_relabel", "goal_reward"]
+__all__ = ["GoalTD3Config", "GoalTD3", "ObsNormaliser", "her_future_relabel", "goal_reward"]
 
 
 @dataclass
@@ -80,7 +82,7 @@ class GoalTD3Config:
                   "obs_clip": self.obs_clip > 0}
         bad = [k for k, ok in checks.items() if not ok]
         if bad:
-            raise ValueError(f"GoalTD3 setting(s) out of range: "
+            raise ValueError("GoalTD3 setting(s) out of range: "
                              + ", ".join(f"{k}={getattr(self, k)!r}" for k in bad)
                              + " (rates and sizes must be positive, gamma in [0, 1), random_eps in [0, 1])")
 
@@ -111,38 +113,49 @@ def her_future_relabel(achieved: np.ndarray, k: int, rng: np.random.Generator) -
     return source, achieved[future]
 
 
-class _RunningNorm:
-    """Running mean/std of the observation (HER normalises its inputs); state is plain arrays."""
+class ObsNormaliser:
+    """Running mean/std of the observation (HER normalises its inputs): Stable-Baselines3's
+    ``RunningMeanStd`` (Chan et al.'s parallel update), in float64, with a floor on the std so that
+    constant features stay finite, and clipping. Before any data: mean 0, std the floor."""
+
+    STD_FLOOR = 1e-2
 
     def __init__(self, dim: int, clip: float):
         self.clip = clip
-        self.count = 0.0
-        self.mean = np.zeros(dim)
-        self.m2 = np.zeros(dim)
+        self.rms = RunningMeanStd(epsilon=0.0, shape=(dim,))
+        self.rms.var = np.zeros(dim)
+
+    @property
+    def count(self) -> float:
+        return float(self.rms.count)
+
+    @property
+    def mean(self) -> np.ndarray:
+        return self.rms.mean
+
+    @property
+    def std(self) -> np.ndarray:
+        return np.sqrt(self.rms.var)
 
     def update(self, x: np.ndarray) -> None:
-        x = np.asarray(x, dtype=np.float64).reshape(-1, self.mean.size)
-        n, mean = x.shape[0], x.mean(0)
-        delta = mean - self.mean
-        total = self.count + n
-        # Chan et al.'s parallel update: exact for batches, no catastrophic cancellation
-        self.m2 += ((x - mean) ** 2).sum(0) + delta ** 2 * self.count * n / total
-        self.mean += delta * n / total
-        self.count = total
+        self.rms.update(np.asarray(x, dtype=np.float64).reshape(-1, self.rms.mean.size))
 
     def __call__(self, x: torch.Tensor) -> torch.Tensor:
-        std = np.sqrt(self.m2 / max(self.count, 1.0)) + 1e-2   # floor: constant features stay finite
-        mean = torch.as_tensor(self.mean, dtype=torch.float32)
-        return ((x - mean) / torch.as_tensor(std, dtype=torch.float32)).clamp(-self.clip, self.clip)
+        mean = torch.as_tensor(self.rms.mean, dtype=torch.float32)
+        std = torch.as_tensor(self.std + self.STD_FLOOR, dtype=torch.float32)
+        return ((x - mean) / std).clamp(-self.clip, self.clip)
 
     def state_dict(self) -> dict[str, Any]:
-        return {"count": self.count, "mean": self.mean.copy(), "m2": self.m2.copy()}
+        return {"count": self.count, "mean": self.rms.mean.copy(), "var": self.rms.var.copy()}
 
     def load_state_dict(self, s: dict[str, Any]) -> None:
-        self.count, self.mean, self.m2 = float(s["count"]), np.array(s["mean"]), np.array(s["m2"])
+        count = float(s["count"])
+        # checkpoints written before the switch to RunningMeanStd hold the sum of squares ("m2")
+        var = np.array(s["var"]) if "var" in s else np.array(s["m2"]) / max(count, 1.0)
+        self.rms.count, self.rms.mean, self.rms.var = count, np.array(s["mean"], dtype=np.float64), var
 
 
-class GoalTD3:
+class GoalTD3(LowLevelBase):
     """Goal-conditioned TD3 + HER: the learned low level of the robosuite tasks.
 
     The loop's low-level protocol: ``act`` (called with the env, from which it reads the sub-goal's
@@ -183,34 +196,34 @@ class GoalTD3:
         self.goal_dim = self.pos_dim + (gripper_index is not None)
         self.obs_dim = obs_dim
         in_dim = (obs_dim if config.use_obs else 0) + self.goal_dim
-        self.actor = mlp(in_dim, config.hidden, self.act_dim, generator)
-        self.actor_target = mlp(in_dim, config.hidden, self.act_dim, generator)
-        self.critics = nn.ModuleList(mlp(in_dim + self.act_dim, config.hidden, 1, generator) for _ in range(2))
-        self.critics_target = nn.ModuleList(mlp(in_dim + self.act_dim, config.hidden, 1, generator)
-                                            for _ in range(2))
-        self.actor_target.load_state_dict(self.actor.state_dict())
-        self.critics_target.load_state_dict(self.critics.state_dict())
-        self.actor_opt = torch.optim.Adam(self.actor.parameters(), lr=config.actor_lr)
-        self.critic_opt = torch.optim.Adam(self.critics.parameters(), lr=config.critic_lr)
-        self.norm = _RunningNorm(obs_dim, config.obs_clip)
+        # actions in [-1, 1] (mapped to the env's bounds by _scale); HER's returns of -1 per step lie
+        # in [-1/(1-γ), 0] (no terminal on reaching), so the TD target is clipped there
+        self.td3 = TD3Core(in_dim, self.act_dim, config.hidden, generator, actor_lr=config.actor_lr,
+                           critic_lr=config.critic_lr, tau=config.tau, policy_delay=config.policy_delay,
+                           target_noise=config.target_noise, target_noise_clip=config.target_noise_clip,
+                           action_l2=config.action_l2, target_range=(-1.0 / (1.0 - config.gamma), 0.0),
+                           init_order=("actor", "actor_target", "critics", "critics_target"))
+        self.norm = ObsNormaliser(obs_dim, config.obs_clip)
         self.buffer = ReplayBuffer(config.buffer_size, rng, obs=(obs_dim,), action=(self.act_dim,),
                                    next_obs=(obs_dim,), goal=(self.goal_dim,), reward=())
         self._traj: dict[str, list[np.ndarray]] = {"obs": [], "action": [], "next_obs": [], "goal": []}
         self._goal: np.ndarray | None = None   # the goal act() last acted towards (observe stores it)
         self.steps = 0
-        self.updates = 0
+
+    @property
+    def actor(self) -> nn.Module:
+        return self.td3.actor
+
+    @property
+    def updates(self) -> int:
+        return self.td3.updates
 
     # ------------------------------------------------------------------ construction
     @classmethod
     def for_env(cls, env: gym.Env, low_cfg: dict[str, Any], gen: torch.Generator,
                 rng: np.random.Generator) -> "GoalTD3":
         """Build for a robosuite sub-goal task (``agents/factory.py``); ``low_cfg`` holds config fields."""
-        names = {f.name for f in dataclasses.fields(GoalTD3Config)}
-        unknown = set(low_cfg) - names
-        if unknown:
-            raise ValueError(f"unknown low setting(s) {sorted(unknown)} for the learned arm low level "
-                             f"(GoalTD3); known: {sorted(names)}")
-        config = GoalTD3Config(**{k: tuple(v) if isinstance(v, list) else v for k, v in low_cfg.items()})
+        config = make_config("low", GoalTD3Config, low_cfg)
         if not isinstance(env.action_space, gym.spaces.Box):
             raise TypeError(f"GoalTD3 needs a continuous (Box) action space, got {env.action_space}; "
                             "grid tasks use GoalDQN")
@@ -242,9 +255,6 @@ class GoalTD3:
         low, high = torch.as_tensor(self.low), torch.as_tensor(self.high)
         return 2.0 * (a - low) / (high - low) - 1.0
 
-    def _q(self, nets: nn.ModuleList, x: torch.Tensor, a_unit: torch.Tensor) -> list[torch.Tensor]:
-        return [net(torch.cat([x, a_unit], -1)).squeeze(-1) for net in nets]
-
     # ------------------------------------------------------------------ acting
     def goal_of(self, env: gym.Env, goal_index: int) -> np.ndarray:
         """Goal vector of sub-goal ``goal_index`` on the env's current state: target xyz (+ gripper)."""
@@ -259,7 +269,7 @@ class GoalTD3:
         """Deterministic action of the actor for ``goal`` (position, [gripper])."""
         with torch.no_grad():
             x = self._inputs(torch.as_tensor(obs, dtype=torch.float32), torch.as_tensor(goal, dtype=torch.float32))
-            return self._scale(torch.tanh(self.actor(x))).numpy()
+            return self._scale(self.td3.mu(x)).numpy()
 
     def act(self, obs: np.ndarray, goal_index: int, explore_eps: float, env: gym.Env) -> np.ndarray:
         """Action towards sub-goal ``goal_index``: Gaussian noise of std ``explore_eps * noise_sigma``
@@ -337,60 +347,30 @@ class GoalTD3:
     # ------------------------------------------------------------------ learning
     def update(self) -> dict[str, float]:
         """One TD3 step on a replay minibatch (critic; actor and targets every ``policy_delay``)."""
-        cfg = self.cfg
-        b = self.buffer.sample(cfg.batch_size)
-        x = self._inputs(b["obs"], b["goal"])
-        x_next = self._inputs(b["next_obs"], b["goal"])
+        b = self.buffer.sample(self.cfg.batch_size)
         a_unit = self._unscale(b["action"])
-        with torch.no_grad():
-            noise = (torch.randn(a_unit.shape, generator=self.gen) * cfg.target_noise).clamp(
-                -cfg.target_noise_clip, cfg.target_noise_clip)
-            a_next = (torch.tanh(self.actor_target(x_next)) + noise).clamp(-1.0, 1.0)
-            q_next = torch.min(*self._q(self.critics_target, x_next, a_next))
-            # no terminal on reaching (HER); returns of -1 per step lie in [-1/(1-γ), 0]
-            y = (b["reward"] + cfg.gamma * q_next).clamp(-1.0 / (1.0 - cfg.gamma), 0.0)
-        q1, q2 = self._q(self.critics, x, a_unit)
-        critic_loss = (q1 - y).pow(2).mean() + (q2 - y).pow(2).mean()
-        self.critic_opt.zero_grad()
-        critic_loss.backward()
-        self.critic_opt.step()
-        self.updates += 1
-        out = {"low/critic_loss": critic_loss.item(), "low/q": q1.mean().item(),
-               "low/reward": b["reward"].mean().item()}
-        if self.updates % cfg.policy_delay == 0:
-            pi = torch.tanh(self.actor(x))
-            actor_loss = -self._q(self.critics[:1], x, pi)[0].mean() + cfg.action_l2 * pi.pow(2).mean()
-            self.actor_opt.zero_grad()
-            actor_loss.backward()
-            self.actor_opt.step()
-            with torch.no_grad():
-                for net, tgt in ((self.actor, self.actor_target), (self.critics, self.critics_target)):
-                    for p, pt in zip(net.parameters(), tgt.parameters()):
-                        pt.mul_(1 - cfg.tau).add_(p, alpha=cfg.tau)
-            out["low/actor_loss"] = actor_loss.item()
+        noise = torch.randn(a_unit.shape, generator=self.gen)
+        step = self.td3.update(self._inputs(b["obs"], b["goal"]), a_unit, b["reward"],
+                               self._inputs(b["next_obs"], b["goal"]), self.cfg.gamma, noise)
+        out = {"low/critic_loss": step.critic_loss, "low/q": step.q, "low/reward": b["reward"].mean().item()}
+        if step.actor_loss is not None:
+            out["low/actor_loss"] = step.actor_loss
         return out
 
     # ------------------------------------------------------------------ checkpointing
     def state_dict(self) -> dict[str, Any]:
         """Networks, optimisers, replay, normaliser, pending trajectory and the noise generator's state."""
-        return {"actor": self.actor.state_dict(), "actor_target": self.actor_target.state_dict(),
-                "critics": self.critics.state_dict(), "critics_target": self.critics_target.state_dict(),
-                "actor_opt": self.actor_opt.state_dict(), "critic_opt": self.critic_opt.state_dict(),
-                "buffer": self.buffer.state_dict(), "norm": self.norm.state_dict(),
-                "traj": {k: np.stack(v) if v else np.zeros((0,)) for k, v in self._traj.items()},
-                "goal": None if self._goal is None else self._goal.copy(),
-                "gen": self.gen.get_state(), "steps": self.steps, "updates": self.updates}
+        return self.td3.state_dict() | {
+            "buffer": self.buffer.state_dict(), "norm": self.norm.state_dict(),
+            "traj": {k: np.stack(v) if v else np.zeros((0,)) for k, v in self._traj.items()},
+            "goal": None if self._goal is None else self._goal.copy(),
+            "gen": self.gen.get_state(), "steps": self.steps, "updates": self.updates}
 
     def load_state_dict(self, s: dict[str, Any]) -> None:
-        self.actor.load_state_dict(s["actor"])
-        self.actor_target.load_state_dict(s["actor_target"])
-        self.critics.load_state_dict(s["critics"])
-        self.critics_target.load_state_dict(s["critics_target"])
-        self.actor_opt.load_state_dict(s["actor_opt"])
-        self.critic_opt.load_state_dict(s["critic_opt"])
+        self.td3.load_state_dict(s)
         self.buffer.load_state_dict(s["buffer"])
         self.norm.load_state_dict(s["norm"])
         self._traj = {k: [np.array(row) for row in v] if len(v) else [] for k, v in s["traj"].items()}
         self._goal = None if s["goal"] is None else np.array(s["goal"])
         self.gen.set_state(s["gen"])
-        self.steps, self.updates = int(s["steps"]), int(s["updates"])
+        self.steps, self.td3.updates = int(s["steps"]), int(s["updates"])

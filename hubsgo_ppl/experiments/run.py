@@ -7,7 +7,7 @@ Run directory::
     critic_history.csv     P(w_i = 1) over training (HUBS-GO)
     tb/                    TensorBoard events
     checkpoint.pt          latest checkpoint, written atomically every ``checkpoint_every`` episodes
-    subgoals.json          G*: the configuration ranking from 10,000 critic samples (HUBS-GO)
+    subgoals.json          G*: the configuration ranking from G_STAR_SAMPLES (10,000) critic samples (HUBS-GO)
     learning_curve.png     return and success over environment steps
     eval.json              written by ``evaluate``
 
@@ -20,7 +20,6 @@ checkpoint is started afresh.
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import math
 import platform
 import sys
@@ -33,9 +32,9 @@ import numpy as np
 import torch
 
 from .. import __version__
-from ..agents.factory import HIERARCHICAL, build_agent
-from ..agents.loop import episode_seed
-from ..agents.presets import apply_overrides, preset
+from ..agents.config import ConfigError, resolve_hyper
+from ..agents.factory import build_agent
+from ..agents.seeding import CRITIC_STREAM, EVAL_SEED_OFFSET, episode_seed, stream_seed
 from ..envs import get_task, make, register
 from .io import (CheckpointError, is_temp_file, load_checkpoint, save_torch, truncate_csv, write_json,
                  write_yaml)
@@ -45,7 +44,10 @@ from .plots import plot_learning_curve
 __all__ = ["RunConfig", "RunError", "train", "evaluate", "load_run", "subgoal_table", "CHECKPOINT"]
 
 CHECKPOINT = "checkpoint.pt"
-FORMAT = 1
+#: version of the checkpoint layout (``{"format", "config", "agent", "episodes", "env_steps", "wall_time"}``)
+CHECKPOINT_FORMAT = 1
+#: critic samples behind G*, the configuration ranking of subgoals.json
+G_STAR_SAMPLES = 10_000
 #: what ``train`` writes into a run directory besides the checkpoint (``tb`` is a folder)
 RUN_FILES = ("config.yaml", "metrics.csv", "critic_history.csv", "tb", "learning_curve.png", "subgoals.json")
 #: per-episode logs, cut back to the checkpoint on resume
@@ -76,110 +78,23 @@ def _critic_from_config(resolved: dict[str, Any]) -> Any:
     from ..specs import ModelSpec
 
     spec = ModelSpec.model_validate(resolved["model_spec"])
-    return SubgoalCritic.from_spec(spec, seed=int(np.random.SeedSequence([resolved["seed"], 4]).generate_state(1)[0]))
-
-
-def _section_settings(agent: str, family: str, low_level: str) -> dict[str, dict[str, Any]]:
-    """``{section: {key: default}}`` for the ``--set`` sections the agent reads (others it ignores)."""
-    import inspect
-
-    def of(cls: Any) -> dict[str, Any]:
-        if dataclasses.is_dataclass(cls):
-            return {f.name: float(f.default) if str(f.type) == "float" and isinstance(f.default, int) else f.default
-                    for f in dataclasses.fields(cls) if f.name != "total_steps"}
-        params = inspect.signature(cls.__init__).parameters.values()
-        return {p.name: p.default for p in params if p.name != "self" and p.kind is p.POSITIONAL_OR_KEYWORD}
-
-    if agent in HIERARCHICAL:
-        from ..agents.high_level import HighLevelConfig
-        from ..agents.loop import LoopConfig
-
-        if low_level == "scripted":
-            from ..agents.scripted_osc import ScriptedOSC as low
-        elif family == "minigrid":
-            from ..agents.low_level import GoalDQNConfig as low
-        else:
-            from ..agents.td3_her import GoalTD3Config as low
-        return {"loop": of(LoopConfig), "high": of(HighLevelConfig), "low": of(low)}
-    if agent == "hiro":
-        from ..agents.hiro import HIROConfig
-
-        return {"hiro": of(HIROConfig)}
-    section = {"dqn": "dqn", "ddqn": "dqn", "ppo": "ppo", "td3": "td3"}.get(agent)
-    if section is not None:     # SB3 keyword arguments (their kinds vary: names only) and the trainer's unit
-        import stable_baselines3 as sb3
-
-        fixed = {"policy", "env", "seed", "verbose", "device", "_init_setup_model"}
-        names = set(of(getattr(sb3, section.upper()))) - fixed
-        return {section: dict.fromkeys([*names, "unit_steps"])}
-    return {}
-
-
-_KINDS = ((bool, (bool,), "true or false"), (int, (int,), "an integer"), (float, (int, float), "a number"),
-          (str, (str,), "a string"), (tuple, (list, tuple), "a list, e.g. [64, 64]"))
-
-
-def _fit(default: Any, value: Any) -> tuple[Any, str | None]:
-    """``(value, None)`` if ``value`` fits a setting whose default is ``default`` (a number written
-    as ``3e-4``, which YAML reads as text, becomes a number), else ``(value, expected kind)``."""
-    if isinstance(default, (int, float)) and not isinstance(default, bool) and isinstance(value, str):
-        with contextlib.suppress(ValueError):
-            number = float(value)
-            value = int(number) if isinstance(default, int) and number.is_integer() else number
-    for kind, accepted, name in _KINDS:
-        if isinstance(default, kind):
-            ok = isinstance(value, accepted) and (kind is bool or not isinstance(value, bool))
-            return value, None if ok else name
-    return value, None
-
-
-def check_overrides(base: dict[str, Any], hyper: dict[str, Any], overrides: list[str], agent: str,
-                    family: str) -> None:
-    """Refuse a ``--set`` key the run would not use, naming the section and its valid keys, and a value
-    of the wrong kind. ``base``: the settings before the overrides; ``hyper``: after (numbers fixed)."""
-    sections = sorted(k for k, v in base.items() if isinstance(v, dict))
-    plain = sorted(k for k, v in base.items() if not isinstance(v, dict))
-    known = _section_settings(agent, family, str(hyper.get("low_level", "learned")))
-    for item in overrides:
-        key, _, text = item.partition("=")
-        parts = key.strip().split(".")
-        if len(parts) == 1:
-            if parts[0] in sections:
-                raise RunError(f"--set {item}: {parts[0]!r} is a section; set one of its keys, e.g. "
-                               f"{parts[0]}.{next(iter(known.get(parts[0], {'KEY': 0})))}=VALUE")
-            if parts[0] not in plain:
-                raise RunError(f"--set {item}: unknown setting {parts[0]!r}; settings: {', '.join(plain)}; "
-                               f"sections: {', '.join(sections)}")
-            valid, section, name = base, None, parts[0]
-        elif len(parts) == 2 and parts[0] in known:
-            section, name = parts
-            valid = known[section]
-            if name not in valid:
-                raise RunError(f"--set {item}: unknown key {name!r} in section {section!r} (agent {agent}); "
-                               f"valid keys: {', '.join(sorted(valid))}")
-        else:
-            continue            # a nested or an env/baseline setting: checked where it is used
-        value, want = _fit(valid[name], apply_overrides({"v": None}, [f"v={text}"])["v"])
-        if want is not None:
-            raise RunError(f"--set {item}: {key.strip()} takes {want} (default {valid[name]!r}), got {value!r}")
-        (hyper if section is None else hyper[section])[name] = value
+    return SubgoalCritic.from_spec(spec, seed=stream_seed(resolved["seed"], CRITIC_STREAM))
 
 
 def resolve(cfg: RunConfig) -> dict[str, Any]:
     """Everything a run needs, as plain data (written to config.yaml and into checkpoints)."""
     info = get_task(cfg.task)
-    hyper = preset(info.family, info.name)
-    if cfg.steps is not None:
-        if cfg.steps <= 0:
-            raise RunError(f"--steps must be positive, got {cfg.steps}")
-        hyper["steps"] = int(cfg.steps)
-    if cfg.low_level is not None:
-        hyper["low_level"] = cfg.low_level
-    try:
-        base, hyper = hyper, apply_overrides(hyper, cfg.overrides)
-    except ValueError as exc:
+    if cfg.steps is not None and cfg.steps <= 0:
+        raise RunError(f"--steps must be positive, got {cfg.steps}")
+    try:        # the preset, the task's settings and --set merged and validated (agents/config.py)
+        hyper = resolve_hyper(info.family, info.name, cfg.agent, cfg.overrides, steps=cfg.steps,
+                              low_level=cfg.low_level)
+    except ConfigError as exc:
         raise RunError(str(exc)) from None
-    check_overrides(base, hyper, cfg.overrides, cfg.agent, info.family)
+    except ValueError as exc:
+        if not cfg.overrides:
+            raise
+        raise RunError(str(exc)) from None
     resolved: dict[str, Any] = {
         "task": info.name, "task_ref": str(cfg.task), "family": info.family,
         "agent": cfg.agent, "seed": int(cfg.seed), "hyper": hyper,
@@ -251,7 +166,7 @@ def _log_episode(logger: Logger, stats: Any, wall: float) -> None:
 
 
 def _save(out: Path, resolved: dict[str, Any], agent: Any, wall: float) -> None:
-    save_torch(out / CHECKPOINT, {"format": FORMAT, "config": resolved, "agent": agent.state_dict(),
+    save_torch(out / CHECKPOINT, {"format": CHECKPOINT_FORMAT, "config": resolved, "agent": agent.state_dict(),
                                    "episodes": agent.episodes, "env_steps": agent.env_steps, "wall_time": wall})
 
 
@@ -294,7 +209,7 @@ def load_run(run_dir: str | Path):
     return ckpt["config"], env, agent, ckpt
 
 
-def subgoal_table(critic: Any, names: list[str], num_samples: int = 10_000, top_k: int = 5) -> dict[str, Any]:
+def subgoal_table(critic: Any, names: list[str], num_samples: int = G_STAR_SAMPLES, top_k: int = 5) -> dict[str, Any]:
     ranking = critic.ranking(num_samples=num_samples, top_k=top_k)
     marg = critic.marginals().detach().cpu().numpy().tolist()
     return {"names": names, "num_samples": num_samples, "ranking": ranking,
@@ -419,7 +334,7 @@ def evaluate(run_dir: str | Path, episodes: int = 10, seed: int | None = None) -
     run_dir = Path(run_dir)
     resolved, env, agent, _ = load_run(run_dir)
     with contextlib.closing(env):
-        base = int(resolved["seed"]) + 1_000_003 if seed is None else int(seed)
+        base = int(resolved["seed"]) + EVAL_SEED_OFFSET if seed is None else int(seed)
         rets, succ, lengths, optimal = [], [], [], []
         if resolved["family"] == "minigrid":
             from ..envs.minigrid.bfs import optimal_return

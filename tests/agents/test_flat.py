@@ -71,7 +71,7 @@ def test_resume_after_crash_continues_exactly(tmp_path, agent):
 
 
 def _plain(x, where="state"):
-    """Checkpoints hold tensors, arrays and plain data only (SB3 issues #171/#172/#1122)."""
+    """Checkpoints hold tensors, arrays and plain data only (never SB3's pickled model objects)."""
     if isinstance(x, dict):
         for k, v in x.items():
             assert isinstance(k, (str, int)), f"{where}: key {k!r}"

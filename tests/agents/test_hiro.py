@@ -139,7 +139,11 @@ def test_hiro_rejects_unknown_settings():
     register()
     cfg = preset("minigrid")
     cfg["hiro"]["horizon"] = 5
-    with pytest.raises(ValueError, match="unknown hiro setting"):
+    with pytest.raises(ValueError, match=r"unknown key 'horizon' in section 'hiro'; valid keys: .*temperature"):
+        build_hiro(make("fourroom"), cfg, seed=0)
+    del cfg["hiro"]["horizon"]
+    cfg["hiro"]["c"] = 0
+    with pytest.raises(ValueError, match="hiro.c, hiro.batch_size and hiro.temperature must be positive"):
         build_hiro(make("fourroom"), cfg, seed=0)
 
 

@@ -135,8 +135,10 @@ def test_bad_settings_are_rejected_by_name():
     with pytest.raises(ValueError, match="gamma=1.5"):
         GoalTD3Config(gamma=1.5)
     env = PointMass()
-    with pytest.raises(ValueError, match="unknown low setting"):
+    with pytest.raises(ValueError, match=r"unknown key 'lr' in section 'low'; valid keys: .*actor_lr"):
         GoalTD3.for_env(env, {"lr": 1e-3}, torch.Generator(), np.random.default_rng(0))
+    with pytest.raises(ValueError, match=r"low.her_k takes an integer"):
+        GoalTD3.for_env(env, {"her_k": "many"}, torch.Generator(), np.random.default_rng(0))
     with pytest.raises(ValueError, match="robot0_eef_pos"):
         GoalTD3.for_env(env, {}, torch.Generator(), np.random.default_rng(0))
 
@@ -187,20 +189,26 @@ def test_learns_to_reach_point_mass_targets():
 
 
 def test_observation_normaliser_matches_numpy_over_batches_and_round_trips():
-    from hubsgo_ppl.agents.td3_her import _RunningNorm
+    from hubsgo_ppl.agents.td3_her import ObsNormaliser
 
     x = np.random.default_rng(0).normal([1.0, -3.0, 0.8], [0.5, 2.0, 1e-4], size=(300, 3))
-    norm = _RunningNorm(3, clip=5.0)
+    norm = ObsNormaliser(3, clip=5.0)
+    np.testing.assert_array_equal(norm(torch.full((3,), 0.02)).numpy(), [2.0, 2.0, 2.0])   # no data: std floor
     for chunk in np.array_split(x, 7):          # unequal batches: the parallel update must be exact
         norm.update(chunk)
+    assert norm.count == 300
     np.testing.assert_allclose(norm.mean, x.mean(0), rtol=1e-12)
-    np.testing.assert_allclose(np.sqrt(norm.m2 / norm.count), x.std(0), rtol=1e-10)
+    np.testing.assert_allclose(norm.std, x.std(0), rtol=1e-10)
     z = norm(torch.as_tensor(x, dtype=torch.float32)).numpy()
     np.testing.assert_allclose(z[:, :2].mean(0), 0.0, atol=1e-4)
     assert np.abs(z).max() <= 5.0                # clipped; the 1e-2 std floor keeps feature 3 finite
-    other = _RunningNorm(3, clip=5.0)
+    other = ObsNormaliser(3, clip=5.0)
     other.load_state_dict(norm.state_dict())
     np.testing.assert_array_equal(other(torch.ones(3)).numpy(), norm(torch.ones(3)).numpy())
+    # a checkpoint of the earlier layout (sum of squared deviations "m2") loads to the same statistics
+    legacy = ObsNormaliser(3, clip=5.0)
+    legacy.load_state_dict({"count": 300.0, "mean": norm.mean.copy(), "m2": norm.std ** 2 * 300})
+    np.testing.assert_allclose(legacy.std, norm.std, rtol=1e-12)
     agent = make_agent(use_obs=True)             # the obs-fed variant builds and acts
     env = PointMass()
     env.reset(seed=0)
