@@ -1,29 +1,51 @@
-"""One logger with swappable outputs (SB3 style): ``record(key, value)`` then ``dump(step)``.
+"""The run's logger: Stable-Baselines3's :class:`~stable_baselines3.common.logger.Logger` (``record(key,
+value)`` then ``dump(step)``) with two outputs, a CSV file and TensorBoard.
 
-Tags are namespaced CleanRL-style (``charts/episodic_return``, ``critic/loss``). Outputs: a CSV file
-with one row per dump (``metrics.csv``: one row per episode) and TensorBoard events.
+Tags are namespaced CleanRL-style (``charts/episodic_return``, ``critic/loss``). Outputs: ``metrics.csv``
+(one row per dump, i.e. per episode) and TensorBoard events.
+
+What comes from SB3 and what does not:
+
+* :class:`Logger` is SB3's, with one change: :meth:`Logger.close` closes every output even if one of
+  them fails (SB3's stops at the first failure and leaves the others open). ``Logger.outputs`` is
+  SB3's ``output_formats`` list.
+* :class:`TensorBoardOutput` is SB3's ``TensorBoardOutputFormat`` with a ``purge_step``: on resume,
+  TensorBoard hides events logged at or after that step by an earlier, interrupted writer, so a resumed
+  run shows each step once. (SB3 builds its ``SummaryWriter`` without one, and a writer opens its
+  events file when built, so the writer is built here instead of by SB3's ``__init__``.)
+* :class:`CSVOutput` is our own :class:`~stable_baselines3.common.logger.KVWriter`. SB3's
+  ``CSVOutputFormat`` cannot keep what the run harness relies on: it opens its file with mode ``w+``,
+  so reopening a run's ``metrics.csv`` on ``--resume`` would erase the rows kept up to the checkpoint
+  (the harness first truncates them to the checkpoint, then appends); when a new column appears it
+  rewrites the header and every row in place, so a kill mid-rewrite loses rows (ours writes a new file
+  and renames it over the old one); and it adds new columns in set order, so the column order of two
+  identical runs can differ (ours keeps first-seen order, which is what makes an interrupted and
+  resumed run's files equal to an uninterrupted run's).
 """
 
 from __future__ import annotations
 
 import csv
 import io
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
+
+from stable_baselines3.common.logger import KVWriter, TensorBoardOutputFormat, filter_excluded_keys
+from stable_baselines3.common.logger import Logger as SB3Logger
 
 from .io import write_text
 
 __all__ = ["Logger", "CSVOutput", "TensorBoardOutput", "read_csv_rows"]
 
 
-class Output(Protocol):
-    def write(self, values: dict[str, Any], step: int) -> None: ...
+class CSVOutput(KVWriter):
+    """Appends one row per write; new keys after the first row are added by rewriting the file atomically
+    (rare). An existing file is appended to under its own header.
 
-    def close(self) -> None: ...
-
-
-class CSVOutput:
-    """Appends rows; new keys after the first row are added by rewriting the file atomically (rare)."""
+    As an SB3 output it is called ``write(values, excluded, step)``; it can also be written directly as
+    ``write(values, step)`` (the critic's history). ``step`` is not a column: pass it as a value if wanted.
+    """
 
     def __init__(self, path: str | Path):
         self.path = Path(path)
@@ -32,8 +54,11 @@ class CSVOutput:
             with self.path.open(newline="") as fh:
                 self.fields = next(csv.reader(fh), [])
 
-    def write(self, values: dict[str, Any], step: int) -> None:
-        new = [k for k in values if k not in self.fields]
+    def write(self, key_values: dict[str, Any], key_excluded: Mapping[str, Any] | int | None = None,
+              step: int = 0) -> None:
+        if isinstance(key_excluded, Mapping):
+            key_values = filter_excluded_keys(key_values, dict(key_excluded), "csv")
+        new = [k for k in key_values if k not in self.fields]
         if new:
             rows = read_csv_rows(self.path) if self.fields else []
             self.fields += new
@@ -43,48 +68,38 @@ class CSVOutput:
             w.writerows(rows)
             write_text(self.path, buf.getvalue())    # a kill mid-rewrite must not lose the earlier rows
         with self.path.open("a", newline="") as fh:
-            csv.DictWriter(fh, fieldnames=self.fields).writerow(values)
+            csv.DictWriter(fh, fieldnames=self.fields).writerow(key_values)
 
     def close(self) -> None:
         return None
 
 
-class TensorBoardOutput:
-    """Scalars to TensorBoard. ``purge_step`` (on resume): TensorBoard hides events logged at or after
-    that step by an earlier, interrupted writer, so a resumed run shows each step once."""
+class TensorBoardOutput(TensorBoardOutputFormat):
+    """SB3's TensorBoard output with ``purge_step`` (on resume: events of an earlier, interrupted writer
+    at or after that step are hidden)."""
 
     def __init__(self, log_dir: str | Path, purge_step: int | None = None):
+        # not super().__init__: it would open a second events file, without purge_step
         from torch.utils.tensorboard import SummaryWriter
 
         self.writer = SummaryWriter(log_dir=str(log_dir), purge_step=purge_step)
-
-    def write(self, values: dict[str, Any], step: int) -> None:
-        for k, v in values.items():
-            if isinstance(v, (int, float)) and not isinstance(v, bool):
-                self.writer.add_scalar(k, v, step)
-
-    def close(self) -> None:
-        self.writer.flush()
-        self.writer.close()
+        self._is_closed = False
 
 
-class Logger:
-    def __init__(self, outputs: list[Output]):
-        self.outputs = outputs
-        self.values: dict[str, Any] = {}
+class Logger(SB3Logger):
+    """SB3's logger over ``outputs`` (each an SB3 ``KVWriter``), without a log folder of its own."""
 
-    def record(self, key: str, value: Any) -> None:
-        self.values[key] = value
+    def __init__(self, outputs: list[KVWriter]):
+        super().__init__(folder=None, output_formats=outputs)
 
-    def dump(self, step: int) -> None:
-        for out in self.outputs:
-            out.write(self.values, step)
-        self.values = {}
+    @property
+    def outputs(self) -> list[KVWriter]:
+        return self.output_formats
 
     def close(self) -> None:
         """Close every output, even if one of them fails (the first failure is raised afterwards)."""
         error: BaseException | None = None
-        for out in self.outputs:
+        for out in self.output_formats:
             try:
                 out.close()
             except Exception as exc:  # noqa: BLE001 - re-raised below, after the others are closed

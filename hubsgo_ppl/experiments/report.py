@@ -7,6 +7,9 @@ those averages across seeds ± their standard error ``std(ddof=1) / sqrt(n)``.
 Curves: each run's episodes are binned by ``env_steps`` (``bins`` equal bins up to the task's largest
 step count); a run's value in a bin is the mean return of its episodes ending there (carried forward
 through bins where no episode ended); the band is ± one standard error across seeds.
+
+Both are pandas group-bys: runs by (variant, task) for the tables, episodes by ``pd.cut`` bin for a
+run's curve (then ``reindex``/``ffill``), and a bins x runs frame's row mean/std for the band.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pandas as pd
 import yaml
 
 from .io import atomic_write, write_text
@@ -119,15 +123,17 @@ def collect(sweep_dir: str | Path) -> list[RunSummary]:
 
 def aggregate(runs: list[RunSummary]) -> dict[tuple[str, str], Cell]:
     """(variant, task) -> mean ± s.e. across seeds of the per-run average returns."""
-    groups: dict[tuple[str, str], list[float]] = {}
-    for r in runs:
-        groups.setdefault((r.variant, r.task), []).append(r.avg_return)
-    cells = {}
-    for (variant, task), vals in groups.items():
-        a = np.asarray(vals)
-        se = float(a.std(ddof=1) / math.sqrt(a.size)) if a.size > 1 else float("nan")
-        cells[(variant, task)] = Cell(task, variant, int(a.size), float(a.mean()), se)
-    return cells
+    if not runs:
+        return {}
+    df = pd.DataFrame({"variant": [r.variant for r in runs], "task": [r.task for r in runs],
+                       "avg_return": [r.avg_return for r in runs]})
+    # Series.mean/std per group: numpy's two-pass sums, so the cells are bit-for-bit the hand computation
+    # (groupby's built-in "mean"/"std" use compensated and online sums, which differ in the last bit).
+    stats = df.groupby(["variant", "task"], sort=False)["avg_return"].agg(
+        count="count", mean=pd.Series.mean, std=pd.Series.std)
+    se = stats["std"] / np.sqrt(stats["count"])           # std(ddof=1) is NaN for a single seed
+    return {(v, t): Cell(t, v, int(row["count"]), float(row["mean"]), float(se[(v, t)]))
+            for (v, t), row in stats.iterrows()}
 
 
 def _fmt(mean: float, se: float) -> str:
@@ -157,6 +163,18 @@ def _paper_table(table: str, tasks: list[str], variants: list[str], labels: dict
     return "\n".join(lines) + "\n"
 
 
+def _binned(run: RunSummary, edges: np.ndarray) -> pd.Series:
+    """One run's curve: the mean return of its episodes ending in each ``env_steps`` bin (bins closed on
+    the right, the first also on the left), carried forward through bins where no episode ended; NaN
+    before its first episode. (pandas sums a bin with compensation: a bin of many episodes can differ
+    from a plain left-to-right sum in the last bit.)"""
+    bins = len(edges) - 1
+    idx = pd.cut(run.steps, edges, labels=False, include_lowest=True, duplicates="drop")
+    idx = np.nan_to_num(idx, nan=0.0).astype(int)     # outside the edges (all steps 0): the first bin
+    means = pd.Series(run.returns).groupby(idx).mean()
+    return means.reindex(range(bins)).ffill()
+
+
 def curves(runs: list[RunSummary], task: str, variants: list[str], bins: int = 40
            ) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """variant -> (bin centres, mean, s.e.) of the binned learning curves on ``task``."""
@@ -168,26 +186,14 @@ def curves(runs: list[RunSummary], task: str, variants: list[str], bins: int = 4
     centres = (edges[:-1] + edges[1:]) / 2
     out = {}
     for v in variants:
-        per_run = []
-        for r in (r for r in mine if r.variant == v):
-            idx = np.clip(np.searchsorted(edges, r.steps, side="left") - 1, 0, bins - 1)
-            sums, counts = np.bincount(idx, r.returns, bins), np.bincount(idx, minlength=bins)
-            vals = np.full(bins, np.nan)
-            vals[counts > 0] = sums[counts > 0] / counts[counts > 0]
-            for i in range(1, bins):           # carry forward through bins where no episode ended
-                if np.isnan(vals[i]):
-                    vals[i] = vals[i - 1]
-            per_run.append(vals)
+        per_run = [_binned(r, edges) for r in mine if r.variant == v]
         if not per_run:
             continue
-        a = np.vstack(per_run)
-        ok = np.isfinite(a)                 # a run has no value before its first episode ends
-        n = ok.sum(0)
-        filled = np.where(ok, a, 0.0)
-        mean = np.where(n > 0, filled.sum(0) / np.maximum(n, 1), np.nan)
-        ss = np.where(ok, (a - mean) ** 2, 0.0).sum(0)
-        se = np.where(n > 1, np.sqrt(ss / np.maximum(n - 1, 1)) / np.sqrt(np.maximum(n, 1)), 0.0)
-        out[v] = (centres, mean, se)
+        table = pd.concat(per_run, axis=1, ignore_index=True)    # bins x runs
+        n = table.count(axis=1)
+        mean = table.mean(axis=1)                               # NaN where no run has a value yet
+        se = (table.std(axis=1, ddof=1) / np.sqrt(n)).where(n > 1, 0.0)
+        out[v] = (centres, mean.to_numpy(), se.to_numpy())
     return out
 
 

@@ -12,7 +12,7 @@ from hubsgo_ppl.agents.flat import DoubleDQN, SB3Trainer, build_ddqn, build_dqn,
 from hubsgo_ppl.agents.presets import preset
 from hubsgo_ppl.envs import make, register
 from hubsgo_ppl.experiments.logger import read_csv_rows
-from hubsgo_ppl.experiments.run import RunConfig, evaluate, train
+from hubsgo_ppl.experiments.run import RunConfig, evaluate, load_run, train
 
 GRID_TASKS = ["keydoor", "fourroom", "keydoor_incorrect", "fourroom_incorrect"]
 TINY = {"dqn": ["dqn.learning_starts=200", "dqn.batch_size=32", "dqn.buffer_size=5000",
@@ -34,9 +34,15 @@ def test_every_flat_agent_trains_on_every_grid_task(tmp_path, agent, task):
     assert summary["finished"] and summary["episodes"] >= 1
     rows = read_csv_rows(out / "metrics.csv")
     assert [int(r["episode"]) for r in rows] == list(range(len(rows)))
+    env = make(task)
+    max_steps = env.unwrapped.max_steps
+    env.close()
     for r in rows:
         assert int(r["options"]) == 1 and float(r["filter_eps"]) == 0.0
-        assert 0 < int(r["length"]) <= 2000 and 0.0 <= float(r["return"]) <= 1.0
+        length, ret, success = int(r["length"]), float(r["return"]), int(r["success"])
+        assert 1 <= length <= max_steps
+        # MiniGrid's reward: 1 - 0.9 * steps / max_steps on reaching the goal, 0 otherwise
+        assert ret == pytest.approx(1 - 0.9 * length / max_steps if success else 0.0, abs=1e-12)
     steps = [int(r["env_steps"]) for r in rows]
     assert steps == sorted(steps) and steps[-1] <= summary["env_steps"]
     if agent != "ppo":     # the whole run is past exploration_fraction, so ε is at its floor
@@ -183,6 +189,13 @@ def test_td3_trains_on_an_arm_task(tmp_path):
                               overrides=["td3.learning_starts=350", "td3.batch_size=32",
                                          "td3.policy_kwargs.net_arch=[32]"]), out, progress=False)
     rows = read_csv_rows(out / "metrics.csv")
-    assert summary["finished"] and len(rows) == 1 and int(rows[0]["length"]) > 0
+    assert summary["finished"] and len(rows) == 1
+    # sparse reward 1 exactly on success, which ends the episode; otherwise it runs to the horizon
+    length, success = int(rows[0]["length"]), int(rows[0]["success"])
+    assert float(rows[0]["return"]) == float(success)
+    _, env, _, _ = load_run(out)
+    horizon = env.unwrapped.horizon
+    env.close()
+    assert int(rows[0]["env_steps"]) == length and (success or length == horizon)
     assert "train/critic_loss" in rows[0] and math.isfinite(float(rows[0]["train/critic_loss"]))
     assert float(rows[0]["explore_eps"]) == pytest.approx(0.1)

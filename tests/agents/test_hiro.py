@@ -114,7 +114,11 @@ def test_hiro_trains_on_every_grid_task(tmp_path, task):
     assert summary["finished"] and len(rows) == 1
     r = rows[0]
     assert int(r["options"]) == -(-int(r["length"]) // 10)        # one goal per c = 10 steps
-    assert 0.0 <= float(r["high/relabel_rate"]) <= 1.0
+    # the episode's relabel rate is the fraction of replayed high-level transitions whose goal the
+    # correction changed: the agent's own counts over this (only) episode's batches of 8
+    replayed, changed = load_checkpoint(out / "checkpoint.pt")["agent"]["relabelled"]
+    assert replayed == 8 * (int(r["options"]) - 7)      # one update per option from the 8th on
+    assert float(r["high/relabel_rate"]) == pytest.approx(changed / replayed, rel=1e-12)
     if int(r["length"]) > 300:             # the low level learns once it holds 300 transitions
         assert np.isfinite(float(r["low/td_loss"]))
     assert evaluate(out, episodes=1)["episodes"] == 1

@@ -10,7 +10,8 @@ import pytest
 
 from hubsgo_ppl.agents.scripted_osc import ScriptedOSC
 
-pytest.importorskip("robosuite")
+pytest.importorskip("robosuite", reason="robosuite is not installed: the arm-task tests are skipped (install "
+                    "the 'robosuite' extra; 'make test' sets HUBSGO_REQUIRE_ROBOSUITE=1 and fails instead)")
 
 from hubsgo_ppl.envs.robosuite import make_robosuite_task  # noqa: E402
 from hubsgo_ppl.resources import envs_dir  # noqa: E402
