@@ -1,4 +1,4 @@
-"""The TD3 core shared by HIRO and GoalTD3: SB3's Polyak update, the initialisation order, checkpoint
+"""TD3Core (the TD3 core shared by HIRO and GoalTD3): SB3's Polyak update, the initialisation order, checkpoint
 names, and target clipping."""
 
 import numpy as np
