@@ -1,4 +1,4 @@
-"""HUBS-GO's critic filter hands the minibatch, with its likelihood weight, to the critic."""
+"""The sub-goal filters: HUBS-GO's critic filter (the batch weight, the safeguard, outcome evidence) and h-DQN's none."""
 
 import dataclasses
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from hubsgo_ppl.agents.filters import CriticFilter
+from hubsgo_ppl.agents.filters import CriticFilter, NoFilter
 from hubsgo_ppl.agents.loop import LoopConfig
 from hubsgo_ppl.graph import SubgoalGraph
 from hubsgo_ppl.infer.critic import SubgoalCritic, TDBatch
@@ -110,3 +110,31 @@ def test_outcome_critic_waits_for_the_first_success_then_learns_the_route():
     assert stats["critic/set_size"] == 3.0
     assert f.allowed().tolist() == route.tolist()
     assert c.ranking(num_samples=2000, top_k=1)[0]["subgoals"] == ["bk", "bd", "goal"]
+
+
+def test_no_filter_offers_g0_and_holds_no_state():
+    f = NoFilter()
+    assert f.allowed() is None and f.allowed(np.ones(5, dtype=bool)) is None
+    assert f.update(batches(1)[0]) == {} and f.end_episode(np.ones(5, dtype=bool), success=True) is None
+    assert f.state_dict() == {}
+    f.load_state_dict({})
+    with pytest.raises(ValueError, match="NoFilter has no state"):
+        f.load_state_dict(CriticFilter(critic()).state_dict())
+
+
+def test_critic_filter_is_g0_until_its_first_update_then_the_critics_mode():
+    c, twin = critic(), critic()
+    f = CriticFilter(c)
+    assert f.allowed() is None
+    batch = batches(1)[0]
+    d = f.update(batch)
+    direct = twin.update(batch)                       # the same critic updated without the filter
+    mode = c.filtered_set().numpy()
+    assert f.allowed().tolist() == mode.tolist()
+    assert d["critic/set_size"] == mode.sum() and d["critic/kept"] == 0.0
+    assert {k: d[f"critic/{k}"] for k in ("loss", "elbo", "entropy")} == {k: direct[k] for k in ("loss", "elbo",
+                                                                                                "entropy")}
+    np.testing.assert_allclose(f.marginals(), c.marginals().numpy())
+    fresh = CriticFilter(critic(seed=9))
+    fresh.load_state_dict(f.state_dict())
+    assert fresh.allowed().tolist() == mode.tolist()
