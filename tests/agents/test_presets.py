@@ -1,0 +1,42 @@
+"""Hyperparameter presets: family defaults, per-task settings merged over them, and --set overrides."""
+
+import pytest
+
+from hubsgo_ppl.agents.presets import PRESETS, TASK_PRESETS, apply_overrides, preset
+
+
+def test_task_settings_merge_over_the_family_defaults():
+    cfg = preset("robosuite", "stack_cubes")
+    assert cfg["steps"] == 20_000 and cfg["env"] == {"horizon": 400}
+    assert cfg["loop"]["option_steps"] == 40
+    assert cfg["loop"]["filter_fraction"] == PRESETS["robosuite"]["loop"]["filter_fraction"]   # kept
+    assert preset("robosuite", "push_any_one")["steps"] == 8_000
+    assert preset("minigrid", "keydoor") == PRESETS["minigrid"]              # mazes have no own settings
+    assert set(TASK_PRESETS) == {"stack_cubes", "push_any_one", "collect_three_balls"}
+    with pytest.raises(KeyError, match="no hyperparameter preset for task family 'atari'"):
+        preset("atari")
+
+
+def test_presets_are_copies():
+    cfg = preset("minigrid")
+    cfg["high"]["hidden"].append(7)
+    cfg["loop"]["option_steps"] = 99
+    assert PRESETS["minigrid"]["high"]["hidden"] == [128, 128] and PRESETS["minigrid"]["loop"]["option_steps"] == 10
+
+
+def test_overrides_parse_yaml_values_at_any_depth_and_leave_the_input_alone():
+    base = preset("minigrid")
+    cfg = apply_overrides(base, ["loop.option_steps=30", "high.hidden=[32, 16]", "dqn.policy_kwargs.net_arch=[8]",
+                                 "high.lr=0.003", "loop.filter_given_achieved=false", "steps=500"])
+    assert cfg["loop"]["option_steps"] == 30 and cfg["high"]["hidden"] == [32, 16]
+    assert cfg["dqn"]["policy_kwargs"]["net_arch"] == [8] and cfg["high"]["lr"] == 0.003
+    assert cfg["loop"]["filter_given_achieved"] is False and cfg["steps"] == 500
+    assert base == PRESETS["minigrid"]
+
+
+@pytest.mark.parametrize("item, message", [("loop.option_steps", "expected KEY=VALUE"),
+                                           ("nope.x=1", "unknown section 'nope'"),
+                                           ("steps.x=1", "unknown section 'steps'")])
+def test_bad_overrides_name_the_problem(item, message):
+    with pytest.raises(ValueError, match=message):
+        apply_overrides(preset("minigrid"), [item])
