@@ -1,0 +1,65 @@
+"""The critic's readers: unique_rows, the filtered set (given achieved sub-goals), G*, log q and the
+sampled marginals above the exact limit."""
+
+import pytest
+import torch
+
+from hubsgo_ppl.distributions import state_table
+from hubsgo_ppl.graph import SubgoalGraph
+from hubsgo_ppl.infer.critic import InferenceConfig, SubgoalCritic
+from hubsgo_ppl.infer.readout import unique_rows
+
+GRAPH = SubgoalGraph(["a1", "b1", "a2", "b2"], [("a1", "b1", 1), ("a2", "b2", 1), ("a1", "a2", -1)])
+
+
+def _critic(theta=(2.0, 2.0, -1.0, -1.0), seed=0, **cfg):
+    c = SubgoalCritic(GRAPH, config=InferenceConfig(num_samples=64, burn_in=8, **cfg), seed=seed)
+    sd = c.state_dict()
+    sd["theta"] = torch.tensor(theta)
+    c.load_state_dict(sd)
+    return c
+
+
+def test_unique_rows_is_torch_unique_in_the_same_order():
+    g = torch.Generator().manual_seed(0)
+    w = (torch.rand(200, 6, generator=g) > 0.5).float()
+    configs, counts = unique_rows(w)
+    ref_configs, ref_counts = torch.unique(w, dim=0, return_counts=True)
+    assert torch.equal(configs, ref_configs) and torch.equal(counts, ref_counts)
+    assert int(counts.sum()) == 200
+
+
+def test_filtered_set_is_the_mode_of_the_samples_that_agree_with_the_given():
+    critic = _critic()
+    samples = torch.tensor([[1, 1, 0, 0]] * 5 + [[0, 0, 1, 1]] * 3 + [[1, 0, 1, 0]] * 2, dtype=torch.float32)
+    critic._last_samples = samples
+    assert critic.filtered_set().tolist() == [True, True, False, False]
+    given = torch.tensor([[False, False, True, False],      # holds a2: the mode among rows with a2
+                          [False, True, False, True]])      # nothing agrees: the unconditional mode
+    assert critic.filtered_set(given=given).tolist() == [[False, False, True, True], [True, True, False, False]]
+    assert critic.filtered_set(given=given[0]).tolist() == [False, False, True, True]
+    with pytest.raises(ValueError, match=r"given must have shape \(4,\) or \(B, 4\)"):
+        critic.filtered_set(given=torch.zeros(3, dtype=torch.bool))
+
+
+def test_ranking_puts_the_most_probable_configuration_first_with_its_exact_probability():
+    critic = _critic(theta=(3.0, 3.0, -3.0, -3.0))
+    top = critic.ranking(num_samples=3000, top_k=3)
+    assert top[0]["subgoals"] == ["a1", "b1"] and top[0]["mask"] == [1, 1, 0, 0]
+    assert [r["prob"] for r in top] == sorted((r["prob"] for r in top), reverse=True)
+    exact = critic.log_q(torch.tensor([1.0, 1.0, 0.0, 0.0])).exp().item()
+    assert top[0]["exact_prob"] == pytest.approx(exact, rel=1e-5)
+    assert abs(top[0]["prob"] - exact) < 5 * (exact * (1 - exact) / 3000) ** 0.5
+    assert torch.logsumexp(critic.log_q(state_table(4)), 0).item() == pytest.approx(0.0, abs=1e-5)
+    with pytest.raises(ValueError, match="need num_samples >= 1 and top_k >= 1"):
+        critic.ranking(num_samples=0)
+
+
+def test_marginals_above_the_exact_limit_are_the_last_samples_mean():
+    critic = _critic(exact_max_n=2)
+    with pytest.raises(RuntimeError, match="no update has run yet"):
+        critic.last_samples()
+    critic._last_samples = torch.tensor([[1.0, 0, 0, 1], [1.0, 1, 0, 0]])
+    assert critic.marginals().tolist() == [1.0, 0.5, 0.0, 0.5]
+    exact = _critic().marginals()
+    assert torch.allclose(exact, (critic.log_q(state_table(4)).exp()[:, None] * state_table(4)).sum(0), atol=1e-5)
