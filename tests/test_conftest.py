@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-ARM_TESTS = "tests/envs/test_robosuite_tasks.py"
+ARM_TESTS = "tests/envs/robosuite/test_gym_wrapper.py"
 
 
 def _pytest_without_robosuite(tmp_path, *args, require):

@@ -1,0 +1,67 @@
+"""The shared arm-task machinery (SubgoalManipulationEnv), on StackCubes: the reach/grasp/place predicates,
+their targets routed via travel height, and the sub-goal catalogue checks."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("robosuite", reason="robosuite is not installed: the arm-task tests are skipped (install "
+                    "the 'robosuite' extra; 'make test' sets HUBSGO_REQUIRE_ROBOSUITE=1 and fails instead)")
+
+from hubsgo_ppl.envs.robosuite import make_robosuite_task  # noqa: E402
+from hubsgo_ppl.specs import SpecError  # noqa: E402
+
+pytestmark = pytest.mark.mujoco
+
+
+def test_reach_above_predicate_and_target(arm_env, put, achieved):
+    e = arm_env("stack_cubes")
+    t = e.unwrapped.task
+    i = e.unwrapped.subgoal_names.index("reach_above_red")
+    eef = t.eef_position()
+    put(e, "red", eef - [0.0, 0.0, t.hover_height + 0.01])
+    assert achieved(e)["reach_above_red"]
+    xyz, g = e.unwrapped.subgoal_target(i)
+    np.testing.assert_allclose(xyz, t.object_position("red") + [0, 0, t.hover_height], atol=1e-9)
+    assert g == -1.0
+    put(e, "red", eef - [0.0, 0.03, t.hover_height])
+    assert not achieved(e)["reach_above_red"]
+
+
+def test_grasp_and_place_targets_route_via_travel_height(arm_env, achieved):
+    e = arm_env("stack_cubes")
+    t = e.unwrapped.task
+    red = t.object_position("red")
+    z_travel = t.table_top + t.travel_clearance
+    assert t.eef_position()[2] > z_travel        # the hand starts above travel height
+    xyz, g = e.unwrapped.subgoal_target(e.unwrapped.subgoal_names.index("grasp_red"))
+    np.testing.assert_allclose(xyz, [red[0], red[1], z_travel], atol=1e-9)
+    assert g == -1.0 and not achieved(e)["grasp_red"]
+    # place without holding the cube: go above the support with the gripper open
+    xyz, g = e.unwrapped.subgoal_target(e.unwrapped.subgoal_names.index("place_red_on_target"))
+    np.testing.assert_allclose(xyz[:2], t.place_top("target")[:2], atol=1e-9)
+    assert g == -1.0
+    with pytest.raises(IndexError, match="8 sub-goals"):
+        e.unwrapped.subgoal_target(8)
+
+
+def _bad_catalogue(tmp_path: Path, source: str, subgoal: str) -> str:
+    text = Path(source).read_text().split("subgoals:")[0]
+    path = tmp_path / "bad.yaml"
+    path.write_text(text + "subgoals:\n  - " + subgoal + "\n")
+    return str(path)
+
+
+def test_bad_subgoals_name_the_problem(tmp_path, catalogue):
+    source = catalogue("stack_cubes")
+    with pytest.raises(SpecError, match=r"bad.yaml: subgoals\[0\] \(x\): kind 'fly' .*use one of: grasp, place_on"):
+        make_robosuite_task(_bad_catalogue(tmp_path, source, "{name: x, kind: fly, args: {object: red}}"))
+    with pytest.raises(SpecError, match=r"args.object: 'blue' is not an object .*use one of: red, green"):
+        make_robosuite_task(_bad_catalogue(tmp_path, source, "{name: x, kind: grasp, args: {object: blue}}"))
+    with pytest.raises(SpecError, match=r"args: unknown key\(s\) \['colour'\] for kind 'grasp'"):
+        make_robosuite_task(_bad_catalogue(tmp_path, source, "{name: x, kind: grasp, args: {object: red, colour: 1}}"))
+    with pytest.raises(SpecError, match="args.object: required for kind 'grasp'"):
+        make_robosuite_task(_bad_catalogue(tmp_path, source, "{name: x, kind: grasp, args: {}}"))
