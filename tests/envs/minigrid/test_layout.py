@@ -58,7 +58,7 @@ def test_parse_small_layout():
     assert len(lay.walls) == 20 and (0, 0) in lay.walls and (3, 2) not in lay.walls
 
 
-def test_builtin_layouts_match_issue_coordinates():
+def test_builtin_layouts_match_the_documented_coordinates():
     kd = load_maze_spec(envs_dir() / "keydoor.yaml").layout
     assert (kd.width, kd.height, kd.agent_start, kd.goal) == (13, 13, (1, 6), (11, 6))
     assert {(o.type, o.color, o.cell) for o in kd.objects} == {
