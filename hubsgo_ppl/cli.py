@@ -1,6 +1,8 @@
 """``hubsgo``: train, evaluate and inspect HUBS-GO runs.
 
     hubsgo train TASK [--agent hubsgo|hdqn|ddqn|...] [--model SPEC] [--steps N] [--seed S] [--out DIR] [--resume]
+                      [--stop-at STEP] [--init-from RUN [--transfer critic,high,low]]
+    hubsgo revise RUN_DIR --model NEW_SPEC [--steps TOTAL] [--stop-at STEP] [--no-train]
     hubsgo evaluate RUN_DIR [--episodes K]
     hubsgo subgoals RUN_DIR
     hubsgo tasks
@@ -43,15 +45,77 @@ def cmd_train(args: argparse.Namespace) -> int:
     from .experiments.run import RunConfig, train
 
     out = Path(args.out) if args.out else Path("runs") / f"{args.task}-{args.agent}-s{args.seed}"
+    if args.transfer is not None and args.init_from is None:
+        from .experiments.run import RunError
+
+        raise RunError("--transfer names what to take from the run given by --init-from; add --init-from RUN")
     cfg = RunConfig(task=args.task, agent=args.agent, model=args.model, graph=args.graph, steps=args.steps,
-                    seed=args.seed, low_level=args.low_level, overrides=args.set or [])
-    summary = train(cfg, out, resume=args.resume, progress=not args.no_progress)
-    print(f"run: {summary['run_dir']}  episodes={summary['episodes']}  env_steps={summary['env_steps']}  "
-          f"wall={summary['wall_time']:.0f}s")
-    table_path = out / "subgoals.json"
-    if table_path.exists():
-        print(_fmt_ranking(json.loads(table_path.read_text())))
+                    seed=args.seed, low_level=args.low_level, overrides=args.set or [], init_from=args.init_from,
+                    transfer=args.transfer.split(",") if args.transfer is not None else None)
+    summary = train(cfg, out, resume=args.resume, progress=not args.no_progress, stop_at=args.stop_at)
+    _print_summary(summary, out)
     return 0
+
+
+def _fmt_transfer(init: dict[str, Any]) -> str:
+    parts = []
+    for part, words in (("critic", "critic"), ("high", "high level"), ("low", "low level")):
+        m = init["mapped"].get(part)
+        if m is None:
+            continue
+        if part == "critic":
+            parts.append(f"critic ({m['subgoals']} sub-goals, {m['edges']} edges by name)")
+        else:
+            parts.append(f"{words} ({next(iter(m.values()))} {next(iter(m))} by name)")
+    return (f"initialised from {init['run']} ({init['agent']} on {init['task']}, {init['env_steps']:,} env steps): "
+            + ", ".join(parts))
+
+
+def _print_summary(summary: dict[str, Any], out: Path) -> None:
+    if summary.get("init_from"):
+        print(_fmt_transfer(summary["init_from"]))
+    state = "" if summary["finished"] else "  (paused before its budget; continue with --resume)"
+    print(f"run: {summary['run_dir']}  episodes={summary['episodes']}  env_steps={summary['env_steps']}  "
+          f"wall={summary['wall_time']:.0f}s{state}")
+    table_path = out / "subgoals.json"
+    if table_path.exists() and summary["finished"]:
+        print(_fmt_ranking(json.loads(table_path.read_text())))
+
+
+def _names(items: list[str]) -> str:
+    return ", ".join(items) or "none"
+
+
+def cmd_revise(args: argparse.Namespace) -> int:
+    from .experiments.revise import apply_revision
+    from .experiments.run import RunConfig, train
+
+    run_dir = Path(args.run_dir)
+    r = apply_revision(run_dir, args.model, steps=args.steps)
+    print(f"revision {r['revision']} of {run_dir} at env step {r['env_steps']:,} (episode {r['episode']}): "
+          f"{r['spec_before']} -> {r['spec_after']}")
+    print(f"  sub-goals dropped: {_names(r['subgoals_dropped'])}; added: {_names(r['subgoals_added'])}")
+    print(f"  edges added: {_names(r['edges_added'])}; dropped: {_names(r['edges_dropped'])}; "
+          f"re-signed: {_names(r['edges_resigned'])}; graph {r['graph']}, prior {r['prior']}, "
+          f"likelihood {r['likelihood']}, inference {r['inference']}")
+    k = r["kept"]
+    print(f"  carried over by name: {k['theta']} unary factors, {k['couplings']} couplings, {k['high_outputs']} "
+          f"high-level outputs; new: {_names(r['new']['subgoals'] + r['new']['edges'])}; the critic's optimiser "
+          f"restarts")
+    print(f"  recorded in {run_dir / 'revisions' / format(r['revision'], '03d')} and {run_dir / 'revisions.csv'}")
+    if args.no_train:
+        print(f"continue with: hubsgo train {_run_task(run_dir)} --out {run_dir} --resume")
+        return 0
+    summary = train(RunConfig(task=_run_task(run_dir)), run_dir, resume=True, progress=not args.no_progress,
+                    stop_at=args.stop_at)
+    _print_summary(summary, run_dir)
+    return 0
+
+
+def _run_task(run_dir: Path) -> str:
+    import yaml
+
+    return str(yaml.safe_load((run_dir / "config.yaml").read_text())["task_ref"])
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
@@ -200,8 +264,25 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--low-level", choices=["learned", "scripted"], help="low level (default: per family)")
     t.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override a hyperparameter, e.g. --set loop.option_steps=30 (repeatable)")
+    t.add_argument("--stop-at", type=int, metavar="STEP",
+                   help="pause once this env step is reached (checkpointed; the schedules still span --steps): "
+                        "review, then `hubsgo revise` or --resume")
+    t.add_argument("--init-from", metavar="RUN",
+                   help="start from this run's critic, high level and low level, sub-goals matched by name")
+    t.add_argument("--transfer", metavar="PARTS",
+                   help="with --init-from: which parts, comma-separated from critic,high,low (default: all that apply)")
     t.add_argument("--no-progress", action="store_true", help="no progress bar")
     t.set_defaults(func=cmd_train)
+
+    rv = sub.add_parser("revise", help="continue a HUBS-GO run with a revised critic spec (add or drop sub-goals, "
+                                       "add, drop or re-sign edges, change the prior or the likelihood)")
+    rv.add_argument("run_dir")
+    rv.add_argument("--model", required=True, help="the revised critic spec (.yaml path or built-in name)")
+    rv.add_argument("--steps", type=int, help="total env-step budget to train to (default: the run's)")
+    rv.add_argument("--stop-at", type=int, metavar="STEP", help="pause once this env step is reached")
+    rv.add_argument("--no-train", action="store_true", help="only revise the checkpoint; continue later with --resume")
+    rv.add_argument("--no-progress", action="store_true", help="no progress bar")
+    rv.set_defaults(func=cmd_revise)
 
     e = sub.add_parser("evaluate", help="greedy return and success rate of a trained run")
     e.add_argument("run_dir")

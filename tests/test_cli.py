@@ -150,3 +150,50 @@ def test_resume_of_a_run_killed_before_its_first_checkpoint_starts_afresh(tmp_pa
     assert (run / "checkpoint.pt").is_file()
     assert not (run / "tb" / "events.out.tfevents.1.host.1.0").exists()
     assert not list(run.glob(".*.tmp"))
+
+
+def _five_subgoal_spec(path):
+    spec = yaml.safe_load(open(__import__("hubsgo_ppl.resources", fromlist=["models_dir"]).models_dir()
+                               / "keydoor_incorrect-specific.yaml"))
+    spec["name"] = "keydoor_incorrect-no-corners"
+    spec["subgoals"] = spec["subgoals"][:5]
+    path.write_text(yaml.safe_dump(spec))
+    return path
+
+
+def test_stop_at_review_revise_and_a_subset_spec_from_scratch(tmp_path, capsys):
+    run, spec = tmp_path / "run", _five_subgoal_spec(tmp_path / "no-corners.yaml")
+    assert main(["train", "keydoor_incorrect", "--steps", "900", "--stop-at", "300", "--seed", "0", "--out", str(run),
+                 "--no-progress", *TINY]) == 0
+    out = capsys.readouterr().out
+    assert "paused before its budget" in out and "G* from" not in out
+    assert main(["revise", str(run), "--model", str(spec), "--no-progress"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith(f"revision 1 of {run} at env step ") and "-> keydoor_incorrect-no-corners" in out[0]
+    assert "sub-goals dropped: corner_nw, corner_sw, corner_ne, corner_se; added: none" in out[1]
+    assert "carried over by name: 5 unary factors, 6 couplings, 5 high-level outputs" in out[3]
+    assert any(line.startswith(f"run: {run}  ") and "env_steps=" in line for line in out)
+    marginals = [line for line in out if line.startswith("marginals P(w=1): ")]
+    assert marginals and "corner" not in marginals[0] and "goal=" in marginals[0]
+    rows = list(csv.DictReader((run / "revisions.csv").open(newline="")))
+    assert len(rows) == 1 and rows[0]["subgoals_dropped"] == "corner_nw corner_sw corner_ne corner_se"
+
+    fresh = tmp_path / "fresh"          # the corrected spec from scratch: the corners are no candidates
+    assert main(["train", "keydoor_incorrect", "--model", str(spec), "--steps", "300", "--out", str(fresh),
+                 "--no-progress", *TINY]) == 0
+    captured = capsys.readouterr()
+    assert "not candidates in this run: corner_nw, corner_sw, corner_ne, corner_se" in captured.err
+    assert yaml.safe_load((fresh / "config.yaml").read_text())["subgoals"] == [
+        "yellow_key", "yellow_door", "blue_key", "blue_door", "goal"]
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["train", "keydoor", "--transfer", "critic"], "add --init-from RUN"),
+    (["train", "keydoor", "--stop-at", "0"], "--stop-at must be a positive env step"),
+    (["revise", "/nonexistent/run", "--model", "keydoor-specific"], "no such run directory"),
+])
+def test_revise_and_transfer_bad_input_one_line(argv, needle, capsys, tmp_path):
+    if argv[0] == "train":
+        argv = argv + ["--out", str(tmp_path / "o"), "--no-progress"]
+    assert main(argv) == 2
+    assert needle in _one_error_line(capsys)

@@ -8,8 +8,15 @@ Run directory::
     tb/                    TensorBoard events
     checkpoint.pt          latest checkpoint, written atomically every ``checkpoint_every`` episodes
     subgoals.json          G*: the configuration ranking from G_STAR_SAMPLES (10,000) critic samples (HUBS-GO)
-    learning_curve.png     return and success over environment steps
+    learning_curve.png     return and success over environment steps (revisions marked)
     eval.json              written by ``evaluate``
+    revisions.csv          one line per revision of the critic spec (``hubsgo revise``), if any
+    revisions/NNN/         spec_before.yaml, spec_after.yaml and revision.json of revision NNN
+
+A model spec may list a subset of the task's catalogue: the run then works on the task with only
+those sub-goals (``envs/subset.py``; ``subgoals`` in config.yaml names them, absent when all are
+candidates). ``init_from`` in config.yaml records a run started from another run's critic, high
+level and/or low level (``--init-from``, ``experiments/transfer.py``).
 
 ``--resume`` continues from the checkpoint: rows that the CSV logs gained after it (a run killed with
 ``kill -9``) are cut off first, so a killed-and-resumed run ends with the files of an uninterrupted
@@ -35,13 +42,15 @@ from .. import __version__
 from ..agents.config import ConfigError, resolve_hyper
 from ..agents.factory import build_agent
 from ..agents.seeding import CRITIC_STREAM, EVAL_SEED_OFFSET, episode_seed, stream_seed
-from ..envs import get_task, make, register
+from ..envs import get_task, register
+from ..envs.subset import catalogue_order, check_subset, make_subset
 from .io import (CheckpointError, is_temp_file, load_checkpoint, save_torch, truncate_csv, write_json,
                  write_yaml)
 from .logger import CSVOutput, Logger, TensorBoardOutput, read_csv_rows
 from .plots import plot_learning_curve
 
-__all__ = ["RunConfig", "RunError", "train", "evaluate", "load_run", "subgoal_table", "CHECKPOINT"]
+__all__ = ["RunConfig", "RunError", "train", "evaluate", "load_run", "subgoal_table", "plot_run_curve",
+           "read_revisions", "CHECKPOINT", "REVISIONS_CSV"]
 
 CHECKPOINT = "checkpoint.pt"
 #: version of the checkpoint layout (``{"format", "config", "agent", "episodes", "env_steps", "wall_time"}``)
@@ -52,6 +61,8 @@ G_STAR_SAMPLES = 10_000
 RUN_FILES = ("config.yaml", "metrics.csv", "critic_history.csv", "tb", "learning_curve.png", "subgoals.json")
 #: per-episode logs, cut back to the checkpoint on resume
 EPISODE_LOGS = ("metrics.csv", "critic_history.csv")
+#: one line per revision of the critic spec (experiments/revise.py writes it; the learning curve marks them)
+REVISIONS_CSV = "revisions.csv"
 
 
 class RunError(RuntimeError):
@@ -71,6 +82,8 @@ class RunConfig:
     history_every: int = 5            # episodes between critic marginal snapshots
     threads: int = 1                  # torch threads (small nets: 1 is fastest and reproducible)
     overrides: list[str] = field(default_factory=list)
+    init_from: str | None = None      # a run directory whose critic / high level / low level start this run
+    transfer: list[str] | None = None  # which of them ("critic", "high", "low"); default: all that apply
 
 
 def _critic_from_config(resolved: dict[str, Any]) -> Any:
@@ -106,8 +119,13 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
         from ..specs import load_model_spec, match_subgoals
 
         spec = load_model_spec(cfg.model or f"{info.name}-specific", graph=cfg.graph)
-        spec = match_subgoals(spec, list(names), f"model spec {cfg.model or info.name + '-specific'!r} "
-                                                 f"for task {info.name!r}")
+        source = f"model spec {cfg.model or info.name + '-specific'!r} for task {info.name!r}"
+        if set(spec.subgoals) >= set(names):
+            spec = match_subgoals(spec, list(names), source)
+        else:       # some of the catalogue's sub-goals: the run's candidates are those (envs/subset.py)
+            check_subset(spec.subgoals, names, source)
+            spec = spec.model_copy(update={"subgoals": catalogue_order(spec.subgoals, names)})
+            resolved["subgoals"] = list(spec.subgoals)
         resolved["model_spec"] = spec.model_dump(mode="json")
         resolved["model"] = spec.name
     return resolved
@@ -115,7 +133,8 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
 
 def _build(resolved: dict[str, Any]):
     register()
-    env = make(resolved["task_ref"], **resolved["hyper"].get("env", {}))   # built-in name or catalogue path
+    # built-in name or catalogue path; with a ``subgoals`` subset, the task with only those sub-goals
+    env = make_subset(resolved["task_ref"], resolved.get("subgoals"), **resolved["hyper"].get("env", {}))
     try:
         critic = _critic_from_config(resolved) if resolved["agent"] == "hubsgo" else None
         agent = build_agent(resolved["agent"], env, resolved["hyper"], resolved["seed"], critic=critic)
@@ -237,11 +256,23 @@ def _start(cfg: RunConfig, out: Path, resume: bool):
     if ckpt_path.exists():
         raise RunError(f"{out} already holds a run; continue it with --resume or choose another --out")
     resolved = resolve(cfg)
+    plan = None
+    if cfg.init_from is not None:       # every refusal before anything is written
+        from .transfer import TransferError, plan_transfer
+
+        try:
+            plan = plan_transfer(resolved, cfg.init_from, cfg.transfer)
+        except TransferError as exc:
+            raise RunError(str(exc)) from None
     _check_writable(out)
     removed = _tidy(out, RUN_FILES)
     if removed:
         print(f"hubsgo: {out} has no checkpoint (its run stopped before the first one); removed its partial "
               f"files ({', '.join(removed)}) and started the run afresh", file=sys.stderr)
+    if resolved.get("subgoals"):
+        left = [n for n in get_task(resolved["task_ref"]).catalogue.names if n not in resolved["subgoals"]]
+        print(f"hubsgo: model spec {resolved['model']!r} lists {len(resolved['subgoals'])} of the sub-goals of task "
+              f"{resolved['task']!r}; not candidates in this run: {', '.join(left)}", file=sys.stderr)
     try:
         env, agent = _build(resolved)
     except (TypeError, ValueError) as exc:
@@ -250,6 +281,13 @@ def _start(cfg: RunConfig, out: Path, resume: bool):
         msg = " ".join(str(exc).split())
         raise RunError(f"the run cannot be built with --set {' --set '.join(cfg.overrides)}: {msg}") from None
     try:
+        if plan is not None:
+            from .transfer import TransferError, apply_transfer
+
+            try:
+                resolved["init_from"] = apply_transfer(agent, plan)
+            except TransferError as exc:
+                raise RunError(str(exc)) from None
         write_yaml(out / "config.yaml", resolved)
     except BaseException:
         env.close()
@@ -258,10 +296,16 @@ def _start(cfg: RunConfig, out: Path, resume: bool):
 
 
 def train(cfg: RunConfig, out: str | Path, resume: bool = False, progress: bool = True,
-          max_episodes: int | None = None, on_episode: Callable[[Any], None] | None = None) -> dict[str, Any]:
+          max_episodes: int | None = None, on_episode: Callable[[Any], None] | None = None,
+          stop_at: int | None = None) -> dict[str, Any]:
     """Train (or resume) a run into ``out``. ``max_episodes`` stops early (used to test interruption).
+    ``stop_at``: pause after the episode that reaches this env step (a checkpoint is written; the
+    schedules still run over the whole budget), e.g. to review the critic and revise its spec
+    (``hubsgo revise``) before continuing; ``--resume`` continues a paused run as it was.
     Whatever happens, the env, the progress bar and the log files are closed on return."""
     out = Path(out)
+    if stop_at is not None and int(stop_at) <= 0:
+        raise RunError(f"--stop-at must be a positive env step, got {stop_at}")
     resolved, env, agent, wall0, purge = _start(cfg, out, resume)
     with contextlib.ExitStack() as closing:
         closing.callback(env.close)
@@ -286,7 +330,8 @@ def train(cfg: RunConfig, out: str | Path, resume: bool = False, progress: bool 
         t0 = time.perf_counter()
         episodes_this_call = 0
         try:
-            while agent.env_steps < total and (max_episodes is None or episodes_this_call < max_episodes):
+            while (agent.env_steps < total and (max_episodes is None or episodes_this_call < max_episodes)
+                   and (stop_at is None or agent.env_steps < int(stop_at))):
                 before = agent.env_steps
                 for stats in agent.train_chunk():
                     episodes_this_call += 1
@@ -315,16 +360,61 @@ def train(cfg: RunConfig, out: str | Path, resume: bool = False, progress: bool 
                            f"continue with `hubsgo train {resolved['task']} --out {out} --resume`") from None
         wall = wall0 + time.perf_counter() - t0
         _save(out, resolved, agent, wall)
-        rows = read_csv_rows(out / "metrics.csv")
-        if rows:
-            plot_learning_curve([float(r["env_steps"]) for r in rows], [float(r["return"]) for r in rows],
-                                [float(r["success"]) for r in rows], out / "learning_curve.png",
-                                title=f"{resolved['agent']} on {resolved['task']} (seed {resolved['seed']})")
+        plot_run_curve(out, resolved)
         summary: dict[str, Any] = {"run_dir": str(out), "episodes": agent.episodes, "env_steps": agent.env_steps,
                                    "wall_time": round(wall, 2), "finished": agent.env_steps >= total}
+        if resolved.get("init_from"):
+            summary["init_from"] = resolved["init_from"]
         if has_critic and agent.env_steps >= total:
             write_json(out / "subgoals.json", subgoal_table(agent.filter.critic, names))
     return summary
+
+
+def read_revisions(run_dir: str | Path) -> list[dict[str, str]]:
+    """The rows of ``RUN/revisions.csv`` (none for a run never revised)."""
+    return read_csv_rows(Path(run_dir) / REVISIONS_CSV)
+
+
+def plot_run_curve(run_dir: str | Path, resolved: dict[str, Any] | None = None,
+                   path: str | Path | None = None) -> Path | None:
+    """``learning_curve.png`` of a run (default ``RUN/learning_curve.png``) from its metrics.csv, with a
+    dotted vertical line at the env step of each revision of its critic spec; None without episodes."""
+    run_dir = Path(run_dir)
+    rows = read_csv_rows(run_dir / "metrics.csv")
+    if not rows:
+        return None
+    if resolved is None:
+        import yaml
+
+        resolved = yaml.safe_load((run_dir / "config.yaml").read_text())
+    path = Path(path) if path is not None else run_dir / "learning_curve.png"
+    title = f"{resolved['agent']} on {resolved['task']} (seed {resolved['seed']})"
+    steps, rets, succ = ([float(r[k]) for r in rows] for k in ("env_steps", "return", "success"))
+    revisions = [(int(r["revision"]), float(r["env_steps"])) for r in read_revisions(run_dir)]
+    if not revisions:
+        return plot_learning_curve(steps, rets, succ, path, title=title)
+    from matplotlib.figure import Figure
+
+    from .io import atomic_write
+    from .plots import rolling_mean
+
+    fig = Figure(figsize=(7, 4))
+    ax = fig.subplots()
+    ax.plot(steps, rets, color="0.8", lw=0.8, label="episode return")
+    ax.plot(steps, rolling_mean(rets, 20), color="C0", lw=2, label="return (mean of 20)")
+    ax.plot(steps, rolling_mean(succ, 20), color="C2", lw=1.5, ls="--", label="success rate")
+    for k, (number, step) in enumerate(revisions):
+        ax.axvline(step, color="C3", lw=1.2, ls=":", label="spec revised" if k == 0 else None)
+        ax.annotate(f"r{number}", (step, 1.0), xytext=(3, -10), textcoords="offset points", color="C3", fontsize=8)
+    ax.set_xlabel("environment steps")
+    ax.set_ylabel("return / success")
+    ax.set_ylim(-0.05, 1.05)
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="lower right", fontsize=8)
+    fig.tight_layout()
+    atomic_write(path, lambda fh: fig.savefig(fh, format="png", dpi=110))
+    return path
 
 
 def evaluate(run_dir: str | Path, episodes: int = 10, seed: int | None = None) -> dict[str, Any]:

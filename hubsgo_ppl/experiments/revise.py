@@ -1,0 +1,195 @@
+"""``hubsgo revise RUN --model NEW_SPEC.yaml [--steps TOTAL]``: continue a HUBS-GO run with a revised
+critic spec (the human's side of the mixed-initiative loop, after ``hubsgo review``).
+
+The new spec may add or drop sub-goals, add, drop or re-sign edges, and change the graph preset, the
+prior, the likelihood or the inference settings. Its sub-goals must be sub-goals the task's catalogue
+defines (the task can evaluate nothing else); a spec naming another is refused in one line that
+names it and the catalogue's sub-goals.
+
+*Dropping a sub-goal* removes it from the run's candidate set: the run continues on the task with
+only the spec's sub-goals (:mod:`hubsgo_ppl.envs.subset`), so the high level has no output for it and
+can no longer choose it, the critic has no indicator for it, and the low level no goal for it.
+*Adding* one (a catalogue sub-goal the run does not have, e.g. one dropped by an earlier revision)
+gives each of them a new output, indicator and goal.
+
+What carries over, matched by name (edges by unordered name pair), and how new parts start, is listed
+in :mod:`hubsgo_ppl.experiments.transfer`: in short, the critic's learned unary and pairwise factors
+of every persisting sub-goal and edge (bit for bit), the high level's Q outputs of persisting
+sub-goals (bit for bit; new outputs: the mean of the kept ones), the low level, the replay buffers
+(remapped), the counters and schedules. The critic's Adam state and its baseline restart: the
+objective changed.
+
+The revision is made at the run's checkpoint (the per-episode logs are cut back to it, as on
+``--resume``) and recorded in the run directory::
+
+    revisions.csv                one line per revision: number, env step, episode, what changed
+    revisions/NNN/spec_before.yaml   the critic spec before revision NNN (as the run used it)
+    revisions/NNN/spec_after.yaml    the spec after it
+    revisions/NNN/revision.json      the line of revisions.csv with the lists in full
+
+config.yaml and the checkpoint then hold the revised spec (``revision``: how many revisions the run
+has had); the learning curve marks each revision. Training continues up to ``--steps`` (the new total
+budget; default: the run's). A revision is deterministic: the same revision at the same step of the
+same seeded run gives the same files, metrics.csv included.
+
+    hubsgo train keydoor_incorrect --steps 40000 --stop-at 13000 --out runs/kdi
+    hubsgo review runs/kdi
+    hubsgo revise runs/kdi --model my-keydoor-spec.yaml
+
+    from hubsgo_ppl.experiments.revise import revise
+    revise("runs/kdi", "my-keydoor-spec.yaml")
+"""
+
+from __future__ import annotations
+
+import contextlib
+import copy
+import csv
+import io
+from pathlib import Path
+from typing import Any
+
+from ..envs import get_task
+from ..envs.subset import catalogue_order, check_subset
+from .io import truncate_csv, write_json, write_text, write_yaml
+from .run import (CHECKPOINT, EPISODE_LOGS, REVISIONS_CSV, RunConfig, RunError, _build, _run_checkpoint, _save,
+                  plot_run_curve, train)
+from .transfer import TransferError, revise_agent_state
+
+__all__ = ["revise", "apply_revision", "load_revision_spec", "spec_changes", "REVISIONS_DIR", "REVISION_FIELDS"]
+
+REVISIONS_DIR = "revisions"
+#: the columns of revisions.csv (lists joined with spaces)
+REVISION_FIELDS = ("revision", "env_steps", "episode", "spec_before", "spec_after", "subgoals_added",
+                   "subgoals_dropped", "edges_added", "edges_dropped", "edges_resigned", "graph", "prior",
+                   "likelihood", "inference", "steps")
+
+
+def load_revision_spec(spec: str | Path, resolved: dict[str, Any]):
+    """The revised spec, validated, its sub-goals checked against the run's task catalogue and put in
+    its order. Refuses (SpecError, one line) a sub-goal the catalogue does not define."""
+    from ..specs import load_model_spec
+
+    new = load_model_spec(spec)
+    catalogue = list(get_task(resolved["task_ref"]).catalogue.names)
+    check_subset(new.subgoals, catalogue, f"{spec} (for task {resolved['task']!r})")
+    return new.model_copy(update={"subgoals": catalogue_order(new.subgoals, catalogue)})
+
+
+def _edge_signs(spec: dict[str, Any]) -> dict[frozenset, str]:
+    return {frozenset((u, v)): str(s) for u, v, s in spec.get("edges", [])}
+
+
+def spec_changes(before: dict[str, Any], after: dict[str, Any]) -> dict[str, Any]:
+    """What a revision changes, spec against spec (the edges as the human wrote them)."""
+    b_names, a_names = list(before["subgoals"]), list(after["subgoals"])
+    b_edges, a_edges = _edge_signs(before), _edge_signs(after)
+
+    def label(pair: frozenset, spec: dict[str, Any]) -> str:
+        for u, v, _ in spec.get("edges", []):
+            if frozenset((u, v)) == pair:
+                return f"{u}--{v}"
+        return "--".join(sorted(pair))
+
+    def changed(key: str) -> str:
+        return "changed" if before.get(key) != after.get(key) else "same"
+
+    return {"subgoals_added": [n for n in a_names if n not in b_names],
+            "subgoals_dropped": [n for n in b_names if n not in a_names],
+            "edges_added": [label(p, after) for p in a_edges if p not in b_edges],
+            "edges_dropped": [label(p, before) for p in b_edges if p not in a_edges],
+            "edges_resigned": [f"{label(p, after)}:{b_edges[p]}->{s}" for p, s in a_edges.items()
+                               if p in b_edges and b_edges[p] != s],
+            "graph": changed("graph"), "prior": changed("prior"), "likelihood": changed("likelihood"),
+            "inference": changed("inference")}
+
+
+def _write_revisions_csv(run_dir: Path, upto: int) -> None:
+    """revisions.csv from revisions/001 .. revisions/``upto`` (a folder left by a revision that never
+    reached its checkpoint is not listed, and is overwritten by the next one)."""
+    import json
+
+    buf = io.StringIO(newline="")
+    writer = csv.DictWriter(buf, fieldnames=REVISION_FIELDS, extrasaction="ignore")
+    writer.writeheader()
+    for k in range(1, upto + 1):
+        path = run_dir / REVISIONS_DIR / f"{k:03d}" / "revision.json"
+        if not path.is_file():
+            continue
+        rec = json.loads(path.read_text())
+        writer.writerow({f: " ".join(map(str, rec[f])) if isinstance(rec.get(f), list) else rec.get(f)
+                         for f in REVISION_FIELDS})
+    write_text(run_dir / REVISIONS_CSV, buf.getvalue())
+
+
+def apply_revision(run_dir: str | Path, new_spec: str | Path, steps: int | None = None) -> dict[str, Any]:
+    """Revise the run's critic spec at its checkpoint (module docstring) without training; returns the
+    revision's record (what revision.json holds)."""
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise RunError(f"{run_dir}: no such run directory; pass the --out folder of `hubsgo train`")
+    ckpt = _run_checkpoint(run_dir / CHECKPOINT)
+    old = ckpt["config"]
+    if old.get("agent") != "hubsgo" or "model_spec" not in old:
+        raise RunError(f"{run_dir}: agent {old.get('agent')!r} has no sub-goal critic to revise; "
+                       "revise a run trained with --agent hubsgo")
+    spec = load_revision_spec(new_spec, old)
+    done = int(ckpt["env_steps"])
+    total = int(steps) if steps is not None else int(old["hyper"]["steps"])
+    if total <= done:
+        raise RunError(f"{run_dir}: the run has already taken {done:,} of {'the' if steps else 'its'} {total:,} env "
+                       f"steps; pass --steps TOTAL above {done} to train on after the revision")
+    new = copy.deepcopy(old)
+    new["model_spec"] = spec.model_dump(mode="json")
+    new["model"] = spec.name
+    catalogue = list(get_task(old["task_ref"]).catalogue.names)
+    if list(spec.subgoals) == catalogue:
+        new.pop("subgoals", None)
+    else:
+        new["subgoals"] = list(spec.subgoals)
+    new["hyper"]["steps"] = total
+    number = int(old.get("revision", 0)) + 1
+    new["revision"] = number
+
+    env, agent = _build(new)
+    with contextlib.closing(env):
+        try:
+            state, kept = revise_agent_state(ckpt["agent"], agent)
+            agent.load_state_dict(state)
+        except TransferError as exc:
+            raise RunError(f"{run_dir}: cannot revise: {exc}") from None
+        record = {"revision": number, "env_steps": done, "episode": int(ckpt["episodes"]),
+                  "spec_before": old.get("model"), "spec_after": spec.name, "source": str(new_spec),
+                  **spec_changes(old["model_spec"], new["model_spec"]), "steps": total,
+                  "kept": {"theta": len(kept["subgoals_kept"]), "couplings": len(kept["edges_kept"]),
+                           "high_outputs": kept["high_outputs_kept"]},
+                  "new": {"subgoals": kept["subgoals_new"], "edges": kept["edges_new"]},
+                  "critic_optimizer": kept["critic_optimizer"], "pending_discarded": kept["pending_discarded"],
+                  "outcomes_kept": kept["outcomes_kept"]}
+        folder = run_dir / REVISIONS_DIR / f"{number:03d}"
+        write_yaml(folder / "spec_before.yaml", old["model_spec"])
+        write_yaml(folder / "spec_after.yaml", new["model_spec"])
+        write_json(folder / "revision.json", record)
+        for name in EPISODE_LOGS:           # as --resume does: the logs end at the checkpoint
+            truncate_csv(run_dir / name, "episode", int(ckpt["episodes"]))
+        _save(run_dir, new, agent, float(ckpt.get("wall_time", 0.0)))      # the revision takes effect here
+    write_yaml(run_dir / "config.yaml", new)
+    _write_revisions_csv(run_dir, number)
+    (run_dir / "subgoals.json").unlink(missing_ok=True)     # G* of the old spec; rewritten when the run ends
+    plot_run_curve(run_dir, new)
+    return record
+
+
+def revise(run_dir: str | Path, new_spec: str | Path, steps: int | None = None, progress: bool = True,
+           stop_at: int | None = None, train_after: bool = True) -> dict[str, Any]:
+    """Revise the run's critic spec (:func:`apply_revision`) and, with ``train_after``, continue training
+    it to ``steps`` (``stop_at``: pause there, as ``train``). Returns ``{"revision": record, "summary":
+    train's summary or None}``."""
+    record = apply_revision(run_dir, new_spec, steps)
+    summary = None
+    if train_after:
+        import yaml
+
+        task = yaml.safe_load((Path(run_dir) / "config.yaml").read_text())["task_ref"]
+        summary = train(RunConfig(task=task), run_dir, resume=True, progress=progress, stop_at=stop_at)
+    return {"revision": record, "summary": summary}

@@ -1,0 +1,199 @@
+"""Measure what a mid-run revision of the critic spec is worth (``hubsgo review`` + ``hubsgo revise``).
+
+A sweep file cannot express this (a revision happens in the middle of a run, after a review), so this
+script runs it. For each task with misleading sub-goals and each seed, at the task's budget B:
+
+- ``revised``: train with the task's built-in spec (``<task>-specific``), pause at B/3, review the
+  critic, write the corrected spec (drop every suggested sub-goal that fewer than half of the recent
+  successes achieved, with its edges; give each flagged edge its learned sign), revise, continue to B;
+- ``unrevised``: the same paused run (a copy taken before the revision) continued to B as it was;
+- ``restart``: a run from scratch with the corrected spec of the same seed, budget B.
+
+Per arm it reports, as mean ± standard error over the seeds: the success rate over the last 20
+episodes, the mean return over the last third of the budget, and the env steps until the rolling
+success rate (20 episodes) first reaches 90% (runs that never reach it are counted, not averaged).
+Everything goes under ``--out``: one folder per task, seed and arm, ``results.csv`` (one row per run)
+and ``summary.md``. Re-running skips finished runs (the runs are ordinary run directories).
+
+    .venv/bin/python scripts/measure_revise.py --out runs/measure_revise            # 2 tasks x 5 seeds, 40,000 steps
+    .venv/bin/python scripts/measure_revise.py --out runs/smoke_revise --smoke        # a pipeline check in a minute
+
+``--smoke``: one seed, keydoor_incorrect only, 1,500 steps and tiny networks; it checks that the
+pipeline runs, and measures nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import math
+import shutil
+import sys
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+TASKS = ("keydoor_incorrect", "fourroom_incorrect")
+ARMS = ("revised", "unrevised", "restart")
+WINDOW = 20
+SMOKE = ["high.learning_starts=8", "high.batch_size=8", "low.learning_starts=64", "low.batch_size=32",
+         "low.hidden=[32]", "high.hidden=[32]", "env.max_steps=150", "loop.option_steps=15"]
+
+
+def steps_to(rows: list[dict[str, str]], level: float = 0.9, window: int = WINDOW) -> float:
+    """Env steps at the first episode whose rolling success rate (``window`` episodes) reaches ``level``."""
+    succ = [float(r["success"]) for r in rows]
+    for i in range(window - 1, len(succ)):
+        if sum(succ[i - window + 1: i + 1]) / window >= level:
+            return float(rows[i]["env_steps"])
+    return math.nan
+
+
+def run_stats(run: Path, budget: int) -> dict[str, float]:
+    from hubsgo_ppl.experiments.logger import read_csv_rows
+
+    rows = read_csv_rows(run / "metrics.csv")
+    last = rows[-WINDOW:]
+    tail = [r for r in rows if float(r["env_steps"]) > budget * 2 / 3] or rows[-1:]
+    return {"episodes": len(rows), "final_success": sum(float(r["success"]) for r in last) / max(len(last), 1),
+            "late_return": sum(float(r["return"]) for r in tail) / max(len(tail), 1),
+            "steps_to_90": steps_to(rows)}
+
+
+def corrected_spec(review: dict[str, Any], spec: dict[str, Any], path: Path) -> Path:
+    """The human's revision of ``spec`` after ``review`` (module docstring), written to ``path``."""
+    import yaml
+
+    drop = {d["name"] for d in review["suggested_drops"]
+            if d["success_frequency"] is None or d["success_frequency"] < 0.5}
+    keep = [n for n in spec["subgoals"] if n not in drop]
+    if not keep:                                    # a spec lists at least one sub-goal
+        keep, drop = list(spec["subgoals"]), set()
+    flip = {frozenset((c["u"], c["v"])): c["learned"] for c in review["flagged_edges"]}
+    new = dict(spec, name=f"{spec['name']}-revised", subgoals=keep,
+               edges=[[u, v, flip.get(frozenset((u, v)), s)] for u, v, s in spec["edges"]
+                      if u not in drop and v not in drop])
+    from hubsgo_ppl.experiments.io import write_yaml
+
+    write_yaml(path, new)
+    return path
+
+
+def one(task: str, seed: int, out: Path, steps: int | None, overrides: list[str], threshold: float) -> list[dict]:
+    """The three arms of one (task, seed); returns one result row per arm."""
+    import torch
+    import yaml
+
+    from hubsgo_ppl.diagnostics.review import review
+    from hubsgo_ppl.experiments.io import load_checkpoint
+    from hubsgo_ppl.experiments.revise import revise
+    from hubsgo_ppl.experiments.run import RunConfig, resolve, train
+
+    torch.set_num_threads(1)
+    base = out / task / f"seed{seed}"
+    budget = int(resolve(RunConfig(task=task, steps=steps, overrides=overrides))["hyper"]["steps"])
+    runs = {arm: base / arm for arm in ARMS}
+
+    def finished(run: Path) -> bool:
+        try:
+            return int(load_checkpoint(run / "checkpoint.pt", mmap=True)["env_steps"]) >= budget
+        except Exception:       # noqa: BLE001 - missing or damaged: (re)run it
+            return False
+
+    spec_path = base / "corrected.yaml"
+    if not (finished(runs["revised"]) and finished(runs["unrevised"]) and spec_path.exists()):
+        for arm in ("revised", "unrevised"):
+            shutil.rmtree(runs[arm], ignore_errors=True)
+        cfg = RunConfig(task=task, seed=seed, steps=steps, overrides=overrides)
+        train(cfg, runs["revised"], progress=False, stop_at=max(1, budget // 3))
+        shutil.copytree(runs["revised"], runs["unrevised"])
+        r = review(runs["revised"], threshold=threshold, gif=False, num_samples=2_000)
+        spec = load_checkpoint(runs["revised"] / "checkpoint.pt")["config"]["model_spec"]
+        corrected_spec(r, spec, spec_path)
+        revise(runs["revised"], spec_path, progress=False)
+        train(RunConfig(task=task), runs["unrevised"], resume=True, progress=False)
+    if not finished(runs["restart"]):
+        shutil.rmtree(runs["restart"], ignore_errors=True)
+        train(RunConfig(task=task, seed=seed, steps=steps, model=str(spec_path), overrides=overrides),
+              runs["restart"], progress=False)
+    dropped = [n for n in yaml.safe_load((runs["revised"] / "revisions" / "001" / "spec_before.yaml").read_text())["subgoals"]
+               if n not in yaml.safe_load(spec_path.read_text())["subgoals"]]
+    return [{"task": task, "seed": seed, "arm": arm, "budget": budget, "dropped": " ".join(dropped),
+             **run_stats(runs[arm], budget)} for arm in ARMS]
+
+
+def write_rows(rows: list[dict], path: Path) -> None:
+    from hubsgo_ppl.experiments.io import write_text
+
+    buf = io.StringIO(newline="")
+    writer = csv.DictWriter(buf, fieldnames=list(rows[0]))
+    writer.writeheader()
+    writer.writerows(rows)
+    write_text(path, buf.getvalue())
+
+
+def summarise(rows: list[dict], path: Path) -> str:
+    import numpy as np
+
+    from hubsgo_ppl.experiments.io import write_text
+
+    lines = ["| task | arm | seeds | success, last 20 episodes | return, last third | steps to 90% success |",
+             "|---|---|---|---|---|---|"]
+    for task in dict.fromkeys(r["task"] for r in rows):
+        for arm in ARMS:
+            sel = [r for r in rows if r["task"] == task and r["arm"] == arm]
+            if not sel:
+                continue
+
+            def ms(key):
+                v = np.array([float(r[key]) for r in sel])
+                v = v[np.isfinite(v)]
+                if not len(v):
+                    return "-"
+                se = v.std(ddof=1) / math.sqrt(len(v)) if len(v) > 1 else 0.0
+                return f"{v.mean():.3f} ± {se:.3f}" if key != "steps_to_90" else f"{v.mean():,.0f} ± {se:,.0f}"
+            reached = sum(math.isfinite(float(r["steps_to_90"])) for r in sel)
+            lines.append(f"| {task} | {arm} | {len(sel)} | {ms('final_success')} | {ms('late_return')} | "
+                         f"{ms('steps_to_90')} ({reached}/{len(sel)} reached) |")
+    text = "\n".join(lines) + "\n"
+    write_text(path, text)
+    return text
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--out", required=True, help="folder of the runs and the results")
+    p.add_argument("--tasks", nargs="+", default=list(TASKS))
+    p.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2, 3, 4])
+    p.add_argument("--steps", type=int, help="budget B of every run (default: the task family's preset)")
+    p.add_argument("--threshold", type=float, default=0.2, help="the review's drop threshold")
+    p.add_argument("--workers", type=int, default=2, help="(task, seed) pairs run in parallel")
+    p.add_argument("--smoke", action="store_true", help="one seed, keydoor_incorrect, 1,500 steps, tiny networks")
+    args = p.parse_args(argv)
+    overrides: list[str] = []
+    if args.smoke:
+        args.tasks, args.seeds, args.steps, overrides = ["keydoor_incorrect"], args.seeds[:1], 1_500, SMOKE
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    jobs = [(t, s, out, args.steps, overrides, args.threshold) for t in args.tasks for s in args.seeds]
+    rows: list[dict] = []
+    if args.workers > 1 and len(jobs) > 1:
+        import multiprocessing as mp
+
+        with ProcessPoolExecutor(args.workers, mp_context=mp.get_context("spawn")) as pool:
+            for result in pool.map(one, *zip(*jobs)):
+                rows += result
+    else:
+        for job in jobs:
+            rows += one(*job)
+    write_rows(rows, out / "results.csv")
+    print(summarise(rows, out / "summary.md"))
+    print(f"runs, results.csv and summary.md in {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.path.insert(0, str(ROOT))
+    sys.exit(main())

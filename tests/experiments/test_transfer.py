@@ -1,0 +1,104 @@
+"""`hubsgo train NEW_TASK --init-from RUN [--transfer critic,high,low]`: a run starts from another run's
+critic, high level and low level, sub-goals matched by name; observations of another shape are refused."""
+
+import pytest
+import torch
+import yaml
+
+from hubsgo_ppl.cli import main
+from hubsgo_ppl.experiments.io import load_checkpoint
+from hubsgo_ppl.experiments.logger import read_csv_rows
+from hubsgo_ppl.experiments.run import RunConfig, RunError, train
+
+TINY = ["high.learning_starts=8", "high.batch_size=8", "low.learning_starts=64", "low.batch_size=32",
+        "low.hidden=[32]", "high.hidden=[32]", "env.max_steps=150", "loop.option_steps=15"]
+CLI_TINY = [a for item in TINY for a in ("--set", item)]
+
+
+def _source(root, task, seed=0):
+    # a TD likelihood, so that the source critic has learned something in a tiny budget
+    from hubsgo_ppl.specs import load_model_spec
+
+    out = root / f"{task}-src"
+    spec = load_model_spec(f"{task}-specific").model_dump(mode="json")
+    spec["likelihood"] = {"name": "gaussian"}
+    path = root / f"{task}-td.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    train(RunConfig(task=task, model=str(path), steps=900, seed=seed, overrides=TINY), out, progress=False)
+    return out
+
+
+@pytest.fixture(scope="module")
+def sources(tmp_path_factory):
+    root = tmp_path_factory.mktemp("transfer")
+    return {task: _source(root, task) for task in ("keydoor", "fourroom")}
+
+
+@pytest.mark.parametrize("source, target", [("keydoor", "keydoor_moved"), ("fourroom", "fourroom_moved")])
+def test_tiny_transfer_to_the_similar_task(sources, tmp_path, source, target):
+    src = load_checkpoint(sources[source] / "checkpoint.pt")["agent"]
+    assert src["filter"]["critic"]["num_updates"] > 0
+    out = tmp_path / target
+    cfg = RunConfig(task=target, steps=600, seed=2, overrides=TINY, init_from=str(sources[source]))
+    train(cfg, out, progress=False, max_episodes=0)          # the run's state before its first episode
+    start = load_checkpoint(out / "checkpoint.pt")
+    agent = start["agent"]
+    critic, scritic = agent["filter"]["critic"], src["filter"]["critic"]
+    assert critic["names"] == scritic["names"]                # the same sub-goal names, the same order
+    assert torch.equal(critic["theta"], scritic["theta"])
+    # edges by unordered name pair: fourroom_moved's spec joins other doorways than fourroom's
+    src_j = {frozenset((u, v)): j for (u, v, _), j in zip(scritic["edges"], scritic["coupling"])}
+    shared = 0
+    for (u, v, sign), j in zip(critic["edges"], critic["coupling"]):
+        if frozenset((u, v)) in src_j:
+            assert torch.equal(j, src_j[frozenset((u, v))]), (u, v)
+            shared += 1
+        else:                                   # a new edge: the ising prior's strength * sign (init: prior)
+            assert float(j) == 3.0 * sign, (u, v)
+    assert shared >= 4
+    assert critic["num_updates"] == 0 and critic["optimizer"]["state"] == {}
+    for part in ("high", "low"):
+        for net in ("q", "q_target"):
+            for k, v in src[part][net].items():
+                assert torch.equal(agent[part][net][k], v), (part, net, k)
+        assert agent[part]["buffer"]["size"] == 0 and agent[part]["opt"]["state"] == {}
+    assert agent["filter"]["mask"] is not None, "Ĝt comes from the transferred critic from the first episode on"
+    assert start["env_steps"] == 0 and start["episodes"] == 0
+    init = yaml.safe_load((out / "config.yaml").read_text())["init_from"]
+    assert init["task"] == source and init["parts"] == ["critic", "high", "low"]
+    assert init["mapped"]["high"]["outputs"] == "5/5" and init["mapped"]["critic"]["edges"] == f"{shared}/6"
+
+    summary = train(cfg, out, resume=True, progress=False)   # and it trains on from there
+    assert summary["finished"] and summary["env_steps"] >= 600
+    assert [int(r["episode"]) for r in read_csv_rows(out / "metrics.csv")] == list(range(summary["episodes"]))
+
+
+def test_observations_of_another_shape_are_refused_in_one_line(sources, tmp_path, capsys):
+    out = tmp_path / "twowall"
+    assert main(["train", "twowall", "--init-from", str(sources["keydoor"]), "--out", str(out), "--steps", "300",
+                 "--no-progress", *CLI_TINY]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("hubsgo: error: "), err
+    assert "observation shapes differ: keydoor has (35,), twowall has (41,)" in err[0]
+    assert not out.exists(), "a refused transfer writes nothing"
+    for argv, needle in ((["--transfer", "brain"], "--transfer brain: use some of critic, high, low"),
+                         (["--agent", "hdqn", "--transfer", "critic"], "cannot transfer the critic")):
+        assert main(["train", "keydoor_moved", "--init-from", str(sources["keydoor"]), "--out", str(out),
+                     "--no-progress", *argv]) == 2
+        assert needle in capsys.readouterr().err
+    with pytest.raises(RunError, match="no such run directory"):
+        train(RunConfig(task="keydoor", init_from=str(tmp_path / "nope")), tmp_path / "o", progress=False)
+
+
+def test_the_critic_alone_transfers_by_name_to_a_larger_catalogue(sources, tmp_path):
+    out = tmp_path / "twowall"
+    train(RunConfig(task="twowall", steps=300, seed=0, overrides=TINY, init_from=str(sources["keydoor"]),
+                    transfer=["critic"]), out, progress=False, max_episodes=0)
+    critic = load_checkpoint(out / "checkpoint.pt")["agent"]["filter"]["critic"]
+    src = load_checkpoint(sources["keydoor"] / "checkpoint.pt")["agent"]["filter"]["critic"]
+    for j, name in enumerate(critic["names"]):
+        if name in src["names"]:
+            assert torch.equal(critic["theta"][j], src["theta"][src["names"].index(name)]), name
+        else:                                   # a sub-goal keydoor lacks: the ising prior's field
+            assert float(critic["theta"][j]) == -2.0, name
+    assert yaml.safe_load((out / "config.yaml").read_text())["init_from"]["mapped"]["critic"]["subgoals"] == "5/9"
