@@ -173,3 +173,11 @@ def test_a_resumed_revised_run_is_deterministic(paused, tmp_path):
     table = yaml.safe_load((runs[0] / "subgoals.json").read_text())
     assert list(table["marginals"]) == FIVE
     assert (runs[0] / "learning_curve.png").stat().st_size > 0
+
+
+def test_a_run_without_a_critic_is_refused(tmp_path):
+    run = tmp_path / "hdqn"
+    train(RunConfig(task="keydoor", agent="hdqn", steps=300, seed=0, overrides=TINY), run, progress=False)
+    with pytest.raises(RunError, match="agent 'hdqn' has no sub-goal critic to revise"):
+        apply_revision(run, "keydoor-specific", steps=600)
+    assert not (run / "revisions").exists()
