@@ -1,5 +1,5 @@
-"""The notebooks in notebooks/: committed with outputs stripped (those in WITH_OUTPUTS with the outputs of
-one complete smoke-size run instead), a first cell saying how to run them at full size, and each one
+"""The notebooks in notebooks/: committed with the outputs of one complete smoke-size run (so that they
+read on a code host without running), a first cell saying how to run them at full size, and each one
 executing top to bottom at its smoke size (through nbmake, as CI does)."""
 
 import json
@@ -14,10 +14,8 @@ ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOK_DIR = ROOT / "notebooks"
 NOTEBOOKS = sorted(NOTEBOOK_DIR.glob("*.ipynb"))
 EXPECTED = {"01-critic-explained", "02-keydoor-walkthrough", "03-robustness", "04-mixed-initiative"}  # notebooks/README.md
-# committed with the outputs of a smoke-size run, so that they read without running (notebooks/README.md)
-WITH_OUTPUTS = {"04-mixed-initiative"}
-STRIPPED = [p for p in NOTEBOOKS if p.stem not in WITH_OUTPUTS]
-EXECUTED = [p for p in NOTEBOOKS if p.stem in WITH_OUTPUTS]
+# every notebook is committed with the outputs of a smoke-size run (notebooks/README.md)
+EXECUTED = NOTEBOOKS
 
 
 def _load(path: Path) -> dict:
@@ -37,20 +35,6 @@ def _ids(paths):
 def test_the_listed_notebooks_are_present():
     missing = EXPECTED - {p.stem for p in NOTEBOOKS}
     assert not missing, f"notebooks missing from {NOTEBOOK_DIR}: {sorted(missing)}"
-
-
-@pytest.mark.parametrize("path", STRIPPED, ids=_ids(STRIPPED))
-def test_outputs_are_stripped(path):
-    nb = _load(path)
-    dirty = [
-        i
-        for i, cell in enumerate(nb["cells"])
-        if cell["cell_type"] == "code" and (cell.get("outputs") or cell.get("execution_count") is not None)
-    ]
-    assert not dirty, (
-        f"{path.name}: code cells {dirty} hold outputs or an execution count; strip them before committing "
-        f"(e.g. `jupyter nbconvert --clear-output --inplace {path.relative_to(ROOT)}`)"
-    )
 
 
 @pytest.mark.parametrize("path", EXECUTED, ids=_ids(EXECUTED))
