@@ -24,31 +24,16 @@ pipeline runs, and measures nothing.
 
 from __future__ import annotations
 
-import argparse
-import csv
-import io
 import math
 import shutil
 import sys
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
+from measure_common import SMOKE, WINDOW, mean_se, parser, finish, run_jobs, steps_to  # noqa: E402  (a sibling script module)
 
 ROOT = Path(__file__).resolve().parents[1]
 TASKS = ("keydoor_incorrect", "fourroom_incorrect")
 ARMS = ("revised", "unrevised", "restart")
-WINDOW = 20
-SMOKE = ["high.learning_starts=8", "high.batch_size=8", "low.learning_starts=64", "low.batch_size=32",
-         "low.hidden=[32]", "high.hidden=[32]", "env.max_steps=150", "loop.option_steps=15"]
-
-
-def steps_to(rows: list[dict[str, str]], level: float = 0.9, window: int = WINDOW) -> float:
-    """Env steps at the first episode whose rolling success rate (``window`` episodes) reaches ``level``."""
-    succ = [float(r["success"]) for r in rows]
-    for i in range(window - 1, len(succ)):
-        if sum(succ[i - window + 1: i + 1]) / window >= level:
-            return float(rows[i]["env_steps"])
-    return math.nan
 
 
 def run_stats(run: Path, budget: int) -> dict[str, float]:
@@ -64,7 +49,6 @@ def run_stats(run: Path, budget: int) -> dict[str, float]:
 
 def corrected_spec(review: dict[str, Any], spec: dict[str, Any], path: Path) -> Path:
     """The human's revision of ``spec`` after ``review`` (module docstring), written to ``path``."""
-    import yaml
 
     drop = {d["name"] for d in review["suggested_drops"]
             if d["success_frequency"] is None or d["success_frequency"] < 0.5}
@@ -124,18 +108,7 @@ def one(task: str, seed: int, out: Path, steps: int | None, overrides: list[str]
              **run_stats(runs[arm], budget)} for arm in ARMS]
 
 
-def write_rows(rows: list[dict], path: Path) -> None:
-    from hubsgo_ppl.experiments.io import write_text
-
-    buf = io.StringIO(newline="")
-    writer = csv.DictWriter(buf, fieldnames=list(rows[0]))
-    writer.writeheader()
-    writer.writerows(rows)
-    write_text(path, buf.getvalue())
-
-
 def summarise(rows: list[dict], path: Path) -> str:
-    import numpy as np
 
     from hubsgo_ppl.experiments.io import write_text
 
@@ -148,12 +121,10 @@ def summarise(rows: list[dict], path: Path) -> str:
                 continue
 
             def ms(key):
-                v = np.array([float(r[key]) for r in sel])
-                v = v[np.isfinite(v)]
-                if not len(v):
+                m, se = mean_se(r[key] for r in sel)
+                if math.isnan(m):
                     return "-"
-                se = v.std(ddof=1) / math.sqrt(len(v)) if len(v) > 1 else 0.0
-                return f"{v.mean():.3f} ± {se:.3f}" if key != "steps_to_90" else f"{v.mean():,.0f} ± {se:,.0f}"
+                return f"{m:.3f} ± {se:.3f}" if key != "steps_to_90" else f"{m:,.0f} ± {se:,.0f}"
             reached = sum(math.isfinite(float(r["steps_to_90"])) for r in sel)
             lines.append(f"| {task} | {arm} | {len(sel)} | {ms('final_success')} | {ms('late_return')} | "
                          f"{ms('steps_to_90')} ({reached}/{len(sel)} reached) |")
@@ -163,14 +134,9 @@ def summarise(rows: list[dict], path: Path) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--out", required=True, help="folder of the runs and the results")
+    p = parser(__doc__, "one seed, keydoor_incorrect, 1,500 steps, tiny networks")
     p.add_argument("--tasks", nargs="+", default=list(TASKS))
-    p.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2, 3, 4])
-    p.add_argument("--steps", type=int, help="budget B of every run (default: the task family's preset)")
     p.add_argument("--threshold", type=float, default=0.2, help="the review's drop threshold")
-    p.add_argument("--workers", type=int, default=2, help="(task, seed) pairs run in parallel")
-    p.add_argument("--smoke", action="store_true", help="one seed, keydoor_incorrect, 1,500 steps, tiny networks")
     args = p.parse_args(argv)
     overrides: list[str] = []
     if args.smoke:
@@ -178,20 +144,7 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     jobs = [(t, s, out, args.steps, overrides, args.threshold) for t in args.tasks for s in args.seeds]
-    rows: list[dict] = []
-    if args.workers > 1 and len(jobs) > 1:
-        import multiprocessing as mp
-
-        with ProcessPoolExecutor(args.workers, mp_context=mp.get_context("spawn")) as pool:
-            for result in pool.map(one, *zip(*jobs)):
-                rows += result
-    else:
-        for job in jobs:
-            rows += one(*job)
-    write_rows(rows, out / "results.csv")
-    print(summarise(rows, out / "summary.md"))
-    print(f"runs, results.csv and summary.md in {out}")
-    return 0
+    return finish(run_jobs(one, jobs, args.workers), out, summarise)
 
 
 if __name__ == "__main__":

@@ -23,30 +23,15 @@ checks that the pipeline runs, and measures nothing.
 
 from __future__ import annotations
 
-import argparse
-import csv
-import io
 import math
 import shutil
 import sys
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
+from measure_common import SMOKE, WINDOW, parser, finish, run_jobs, steps_to  # noqa: E402  (a sibling script module)
 
 ROOT = Path(__file__).resolve().parents[1]
 PAIRS = {"keydoor": "keydoor_moved", "fourroom": "fourroom_moved"}
 ARMS = {"scratch": None, "critic": ["critic"], "high": ["high"], "low": ["low"], "all": ["critic", "high", "low"]}
-WINDOW = 20
-SMOKE = ["high.learning_starts=8", "high.batch_size=8", "low.learning_starts=64", "low.batch_size=32",
-         "low.hidden=[32]", "high.hidden=[32]", "env.max_steps=150", "loop.option_steps=15"]
-
-
-def steps_to(rows: list[dict[str, str]], level: float = 0.9, window: int = WINDOW) -> float:
-    """Env steps at the first episode whose rolling success rate (``window`` episodes) reaches ``level``."""
-    succ = [float(r["success"]) for r in rows]
-    for i in range(window - 1, len(succ)):
-        if sum(succ[i - window + 1: i + 1]) / window >= level:
-            return float(rows[i]["env_steps"])
-    return math.nan
 
 
 def one(source: str, seed: int, out: Path, steps: int | None, overrides: list[str]) -> list[dict]:
@@ -112,13 +97,8 @@ def summarise(rows: list[dict], path: Path) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--out", required=True, help="folder of the runs and the results")
+    p = parser(__doc__, "one seed, keydoor -> keydoor_moved, 1,000 steps, tiny networks")
     p.add_argument("--sources", nargs="+", default=list(PAIRS), choices=list(PAIRS))
-    p.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2, 3, 4])
-    p.add_argument("--steps", type=int, help="budget of every run (default: the task family's preset)")
-    p.add_argument("--workers", type=int, default=2, help="(pair, seed) groups run in parallel")
-    p.add_argument("--smoke", action="store_true", help="one seed, keydoor -> keydoor_moved, 1,000 steps, tiny networks")
     args = p.parse_args(argv)
     overrides: list[str] = []
     if args.smoke:
@@ -126,26 +106,7 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     jobs = [(s, seed, out, args.steps, overrides) for s in args.sources for seed in args.seeds]
-    rows: list[dict] = []
-    if args.workers > 1 and len(jobs) > 1:
-        import multiprocessing as mp
-
-        with ProcessPoolExecutor(args.workers, mp_context=mp.get_context("spawn")) as pool:
-            for result in pool.map(one, *zip(*jobs)):
-                rows += result
-    else:
-        for job in jobs:
-            rows += one(*job)
-    from hubsgo_ppl.experiments.io import write_text
-
-    buf = io.StringIO(newline="")
-    writer = csv.DictWriter(buf, fieldnames=list(rows[0]))
-    writer.writeheader()
-    writer.writerows(rows)
-    write_text(out / "results.csv", buf.getvalue())
-    print(summarise(rows, out / "summary.md"))
-    print(f"runs, results.csv and summary.md in {out}")
-    return 0
+    return finish(run_jobs(one, jobs, args.workers), out, summarise)
 
 
 if __name__ == "__main__":

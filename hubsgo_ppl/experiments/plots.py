@@ -23,7 +23,10 @@ def rolling_mean(x: Sequence[float], window: int) -> np.ndarray:
 
 
 def plot_learning_curve(steps: Sequence[float], returns: Sequence[float], success: Sequence[float],
-                        path: str | Path, title: str = "", window: int = 20) -> Path:
+                        path: str | Path, title: str = "", window: int = 20,
+                        revisions: Sequence[tuple[int, float]] = ()) -> Path:
+    """The learning curve as a PNG; ``revisions`` ((number, env step) pairs, from ``hubsgo revise``) are
+    marked as dotted lines labelled r1, r2, ..."""
     from matplotlib.figure import Figure   # no pyplot: leaves the caller's backend (e.g. a notebook's) alone
 
     from .io import atomic_write
@@ -33,6 +36,9 @@ def plot_learning_curve(steps: Sequence[float], returns: Sequence[float], succes
     ax.plot(steps, returns, color="0.8", lw=0.8, label="episode return")
     ax.plot(steps, rolling_mean(returns, window), color="C0", lw=2, label=f"return (mean of {window})")
     ax.plot(steps, rolling_mean(success, window), color="C2", lw=1.5, ls="--", label="success rate")
+    for k, (number, step) in enumerate(revisions):
+        ax.axvline(step, color="C3", lw=1.2, ls=":", label="spec revised" if k == 0 else None)
+        ax.annotate(f"r{number}", (step, 1.0), xytext=(3, -10), textcoords="offset points", color="C3", fontsize=8)
     ax.set_xlabel("environment steps")
     ax.set_ylabel("return / success")
     ax.set_ylim(-0.05, 1.05)

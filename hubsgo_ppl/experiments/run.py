@@ -391,30 +391,7 @@ def plot_run_curve(run_dir: str | Path, resolved: dict[str, Any] | None = None,
     title = f"{resolved['agent']} on {resolved['task']} (seed {resolved['seed']})"
     steps, rets, succ = ([float(r[k]) for r in rows] for k in ("env_steps", "return", "success"))
     revisions = [(int(r["revision"]), float(r["env_steps"])) for r in read_revisions(run_dir)]
-    if not revisions:
-        return plot_learning_curve(steps, rets, succ, path, title=title)
-    from matplotlib.figure import Figure
-
-    from .io import atomic_write
-    from .plots import rolling_mean
-
-    fig = Figure(figsize=(7, 4))
-    ax = fig.subplots()
-    ax.plot(steps, rets, color="0.8", lw=0.8, label="episode return")
-    ax.plot(steps, rolling_mean(rets, 20), color="C0", lw=2, label="return (mean of 20)")
-    ax.plot(steps, rolling_mean(succ, 20), color="C2", lw=1.5, ls="--", label="success rate")
-    for k, (number, step) in enumerate(revisions):
-        ax.axvline(step, color="C3", lw=1.2, ls=":", label="spec revised" if k == 0 else None)
-        ax.annotate(f"r{number}", (step, 1.0), xytext=(3, -10), textcoords="offset points", color="C3", fontsize=8)
-    ax.set_xlabel("environment steps")
-    ax.set_ylabel("return / success")
-    ax.set_ylim(-0.05, 1.05)
-    ax.set_title(title)
-    ax.grid(alpha=0.3)
-    ax.legend(loc="lower right", fontsize=8)
-    fig.tight_layout()
-    atomic_write(path, lambda fh: fig.savefig(fh, format="png", dpi=110))
-    return path
+    return plot_learning_curve(steps, rets, succ, path, title=title, revisions=revisions)
 
 
 def evaluate(run_dir: str | Path, episodes: int = 10, seed: int | None = None) -> dict[str, Any]:

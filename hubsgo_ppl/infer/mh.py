@@ -25,17 +25,9 @@ from ..distributions.mh_kernels import (  # noqa: F401  (_check, _eager_sweeps: 
     unnormalized_log_prob,
 )
 
-__all__ = [
-    "KERNELS",
-    "ChromaticScan",
-    "coupling_matrix",
-    "unnormalized_log_prob",
-    "single_site_sweep",
-    "block_flip_step",
-    "mh_steps",
-    "run_chains",
-    "MRFMHKernel",
-]
+from ..distributions import mh_kernels as _kernels  # noqa: E402
+
+__all__ = [*_kernels.__all__, "MRFMHKernel"]     # the kernels, re-exported, and the Pyro adapter
 
 
 class MRFMHKernel(MCMCKernel):

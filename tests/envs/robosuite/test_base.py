@@ -8,11 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytest.importorskip("robosuite", reason="robosuite is not installed: the arm-task tests are skipped (install "
-                    "the 'robosuite' extra; 'make test' sets HUBSGO_REQUIRE_ROBOSUITE=1 and fails instead)")
-
-from hubsgo_ppl.envs.robosuite import make_robosuite_task  # noqa: E402
-from hubsgo_ppl.specs import SpecError  # noqa: E402
+from hubsgo_ppl.envs.robosuite import make_robosuite_task
+from hubsgo_ppl.specs import SpecError
 
 pytestmark = pytest.mark.mujoco
 

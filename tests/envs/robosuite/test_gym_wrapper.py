@@ -7,14 +7,11 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-pytest.importorskip("robosuite", reason="robosuite is not installed: the arm-task tests are skipped (install "
-                    "the 'robosuite' extra; 'make test' sets HUBSGO_REQUIRE_ROBOSUITE=1 and fails instead)")
+from gymnasium.utils.env_checker import check_env
 
-from gymnasium.utils.env_checker import check_env  # noqa: E402
-
-import hubsgo_ppl.envs as tasks  # noqa: E402
-from hubsgo_ppl.envs.robosuite import make_robosuite_task  # noqa: E402
-from hubsgo_ppl.specs import SpecError  # noqa: E402
+import hubsgo_ppl.envs as tasks
+from hubsgo_ppl.envs.robosuite import make_robosuite_task
+from hubsgo_ppl.specs import SpecError
 
 pytestmark = pytest.mark.mujoco
 

@@ -4,9 +4,6 @@ from __future__ import annotations
 
 import pytest
 
-pytest.importorskip("robosuite", reason="robosuite is not installed: the arm-task tests are skipped (install "
-                    "the 'robosuite' extra; 'make test' sets HUBSGO_REQUIRE_ROBOSUITE=1 and fails instead)")
-
 pytestmark = pytest.mark.mujoco
 
 

@@ -1,0 +1,82 @@
+"""What scripts/measure_revise.py and scripts/measure_transfer.py share: the tiny smoke settings and the
+steps-to-success measure."""
+
+from __future__ import annotations
+
+import math
+
+WINDOW = 20
+SMOKE = ["high.learning_starts=8", "high.batch_size=8", "low.learning_starts=64", "low.batch_size=32",
+         "low.hidden=[32]", "high.hidden=[32]", "env.max_steps=150", "loop.option_steps=15"]
+
+
+def steps_to(rows: list[dict[str, str]], level: float = 0.9, window: int = WINDOW) -> float:
+    """Env steps at the first episode whose rolling success rate (``window`` episodes) reaches ``level``."""
+    succ = [float(r["success"]) for r in rows]
+    for i in range(window - 1, len(succ)):
+        if sum(succ[i - window + 1: i + 1]) / window >= level:
+            return float(rows[i]["env_steps"])
+    return math.nan
+
+
+def run_jobs(one, jobs: list[tuple], workers: int) -> list[dict]:
+    """``one(*job)`` for every job (each returns a list of result rows), ``workers`` at a time in spawned
+    processes; the rows in job order."""
+    rows: list[dict] = []
+    if workers > 1 and len(jobs) > 1:
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as pool:
+            for result in pool.map(one, *zip(*jobs)):
+                rows += result
+    else:
+        for job in jobs:
+            rows += one(*job)
+    return rows
+
+
+def write_rows(rows: list[dict], path) -> None:
+    """The result rows as a CSV, written atomically."""
+    import csv
+    import io
+
+    from hubsgo_ppl.experiments.io import write_text
+
+    buf = io.StringIO(newline="")
+    writer = csv.DictWriter(buf, fieldnames=list(rows[0]))
+    writer.writeheader()
+    writer.writerows(rows)
+    write_text(path, buf.getvalue())
+
+
+def parser(doc: str, smoke: str):
+    """The options both measurements take: --out, --seeds, --steps, --workers, --smoke."""
+    import argparse
+
+    p = argparse.ArgumentParser(description=doc.splitlines()[0])
+    p.add_argument("--out", required=True, help="folder of the runs and the results")
+    p.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2, 3, 4])
+    p.add_argument("--steps", type=int, help="budget of every run (default: the task family's preset)")
+    p.add_argument("--workers", type=int, default=2, help="runs of different seeds in parallel")
+    p.add_argument("--smoke", action="store_true", help=smoke)
+    return p
+
+
+def mean_se(values) -> tuple[float, float]:
+    """Mean and standard error of the finite values (nan, 0 when there are none)."""
+    import numpy as np
+
+    v = np.asarray([float(x) for x in values], dtype=float)
+    v = v[np.isfinite(v)]
+    if not len(v):
+        return math.nan, 0.0
+    return float(v.mean()), float(v.std(ddof=1) / math.sqrt(len(v))) if len(v) > 1 else 0.0
+
+
+def finish(rows: list[dict], out, summarise) -> int:
+    """Write results.csv and summary.md into ``out`` and print the summary."""
+    write_rows(rows, out / "results.csv")
+    print(summarise(rows, out / "summary.md"))
+    print(f"runs, results.csv and summary.md in {out}")
+    return 0
