@@ -54,7 +54,7 @@ from ..envs.subset import catalogue_order, check_subset
 from .io import truncate_csv, write_json, write_text, write_yaml
 from .run import (CHECKPOINT, EPISODE_LOGS, REVISIONS_CSV, RunConfig, RunError, _build, _run_checkpoint, _save,
                   plot_run_curve, train)
-from .transfer import TransferError, revise_agent_state
+from .remap import TransferError, revise_agent_state
 
 __all__ = ["revise", "apply_revision", "load_revision_spec", "spec_changes", "REVISIONS_DIR", "REVISION_FIELDS"]
 
