@@ -80,3 +80,38 @@ def finish(rows: list[dict], out, summarise) -> int:
     print(summarise(rows, out / "summary.md"))
     print(f"runs, results.csv and summary.md in {out}")
     return 0
+
+
+def cell(sel: list[dict], key: str) -> str:
+    """``mean ± s.e.`` of ``key`` over the rows ``sel`` (steps with thousands separators and how many
+    rows reached the level)."""
+    m, se = mean_se(r[key] for r in sel)
+    if key != "steps_to_90":
+        return "-" if math.isnan(m) else f"{m:.3f} ± {se:.3f}"
+    reached = sum(math.isfinite(float(r[key])) for r in sel)
+    return ("-" if math.isnan(m) else f"{m:,.0f} ± {se:,.0f}") + f" ({reached}/{len(sel)} reached)"
+
+
+def summary_table(rows: list[dict], group, arms, header: list[str], keys: list[str], path) -> str:
+    """A markdown table, one line per (group, arm) with rows: the group's label (``group(row)``), the arm,
+    the number of seeds and ``cell`` of each key; written atomically to ``path``."""
+    from hubsgo_ppl.experiments.io import write_text
+
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for label in dict.fromkeys(group(r) for r in rows):
+        for arm in arms:
+            sel = [r for r in rows if group(r) == label and r["arm"] == arm]
+            if sel:
+                lines.append(f"| {label} | {arm} | {len(sel)} | " + " | ".join(cell(sel, k) for k in keys) + " |")
+    text = "\n".join(lines) + "\n"
+    write_text(path, text)
+    return text
+
+
+def output_dir(path):
+    """``path`` as a Path, created if missing."""
+    from pathlib import Path
+
+    out = Path(path)
+    out.mkdir(parents=True, exist_ok=True)
+    return out

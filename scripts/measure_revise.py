@@ -24,12 +24,11 @@ pipeline runs, and measures nothing.
 
 from __future__ import annotations
 
-import math
 import shutil
 import sys
 from pathlib import Path
 from typing import Any
-from measure_common import SMOKE, WINDOW, mean_se, parser, finish, run_jobs, steps_to  # noqa: E402  (a sibling script module)
+from measure_common import SMOKE, WINDOW, finish, parser, run_jobs, output_dir, steps_to, summary_table  # noqa: E402  (a sibling script module)
 
 ROOT = Path(__file__).resolve().parents[1]
 TASKS = ("keydoor_incorrect", "fourroom_incorrect")
@@ -109,28 +108,9 @@ def one(task: str, seed: int, out: Path, steps: int | None, overrides: list[str]
 
 
 def summarise(rows: list[dict], path: Path) -> str:
-
-    from hubsgo_ppl.experiments.io import write_text
-
-    lines = ["| task | arm | seeds | success, last 20 episodes | return, last third | steps to 90% success |",
-             "|---|---|---|---|---|---|"]
-    for task in dict.fromkeys(r["task"] for r in rows):
-        for arm in ARMS:
-            sel = [r for r in rows if r["task"] == task and r["arm"] == arm]
-            if not sel:
-                continue
-
-            def ms(key):
-                m, se = mean_se(r[key] for r in sel)
-                if math.isnan(m):
-                    return "-"
-                return f"{m:.3f} ± {se:.3f}" if key != "steps_to_90" else f"{m:,.0f} ± {se:,.0f}"
-            reached = sum(math.isfinite(float(r["steps_to_90"])) for r in sel)
-            lines.append(f"| {task} | {arm} | {len(sel)} | {ms('final_success')} | {ms('late_return')} | "
-                         f"{ms('steps_to_90')} ({reached}/{len(sel)} reached) |")
-    text = "\n".join(lines) + "\n"
-    write_text(path, text)
-    return text
+    return summary_table(rows, lambda r: r["task"], ARMS,
+                         ["task", "arm", "seeds", "success, last 20 episodes", "return, last third", "steps to 90% success"],
+                         ["final_success", "late_return", "steps_to_90"], path)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -141,8 +121,7 @@ def main(argv: list[str] | None = None) -> int:
     overrides: list[str] = []
     if args.smoke:
         args.tasks, args.seeds, args.steps, overrides = ["keydoor_incorrect"], args.seeds[:1], 1_500, SMOKE
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = output_dir(args.out)
     jobs = [(t, s, out, args.steps, overrides, args.threshold) for t in args.tasks for s in args.seeds]
     return finish(run_jobs(one, jobs, args.workers), out, summarise)
 

@@ -23,11 +23,10 @@ checks that the pipeline runs, and measures nothing.
 
 from __future__ import annotations
 
-import math
 import shutil
 import sys
 from pathlib import Path
-from measure_common import SMOKE, WINDOW, parser, finish, run_jobs, steps_to  # noqa: E402  (a sibling script module)
+from measure_common import SMOKE, WINDOW, finish, parser, run_jobs, output_dir, steps_to, summary_table  # noqa: E402  (a sibling script module)
 
 ROOT = Path(__file__).resolve().parents[1]
 PAIRS = {"keydoor": "keydoor_moved", "fourroom": "fourroom_moved"}
@@ -72,28 +71,9 @@ def one(source: str, seed: int, out: Path, steps: int | None, overrides: list[st
 
 
 def summarise(rows: list[dict], path: Path) -> str:
-    import numpy as np
-
-    from hubsgo_ppl.experiments.io import write_text
-
-    lines = ["| pair | arm | seeds | steps to 90% success | success, last 20 episodes |", "|---|---|---|---|---|"]
-    for pair in dict.fromkeys((r["source"], r["target"]) for r in rows):
-        for arm in ARMS:
-            sel = [r for r in rows if (r["source"], r["target"]) == pair and r["arm"] == arm]
-            if not sel:
-                continue
-            steps = np.array([float(r["steps_to_90"]) for r in sel])
-            reached = steps[np.isfinite(steps)]
-            succ = np.array([float(r["final_success"]) for r in sel])
-
-            def se(v):
-                return v.std(ddof=1) / math.sqrt(len(v)) if len(v) > 1 else 0.0
-            s90 = f"{reached.mean():,.0f} ± {se(reached):,.0f}" if len(reached) else "-"
-            lines.append(f"| {pair[0]} -> {pair[1]} | {arm} | {len(sel)} | {s90} ({len(reached)}/{len(sel)} "
-                         f"reached) | {succ.mean():.3f} ± {se(succ):.3f} |")
-    text = "\n".join(lines) + "\n"
-    write_text(path, text)
-    return text
+    return summary_table(rows, lambda r: f"{r['source']} -> {r['target']}", ARMS,
+                         ["pair", "arm", "seeds", "steps to 90% success", "success, last 20 episodes"],
+                         ["steps_to_90", "final_success"], path)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -103,8 +83,7 @@ def main(argv: list[str] | None = None) -> int:
     overrides: list[str] = []
     if args.smoke:
         args.sources, args.seeds, args.steps, overrides = ["keydoor"], args.seeds[:1], 1_000, SMOKE
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = output_dir(args.out)
     jobs = [(s, seed, out, args.steps, overrides) for s in args.sources for seed in args.seeds]
     return finish(run_jobs(one, jobs, args.workers), out, summarise)
 
