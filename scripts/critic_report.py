@@ -15,8 +15,8 @@ import json
 import math
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
+from measure_common import mean_se, steps_to  # a sibling script module
 
 # The routes of the shipped key/door mazes and FourRoom: sub-goal sets G* may name, nothing else.
 _PAIR = [["yellow_key", "yellow_door"], ["blue_key", "blue_door"]]
@@ -32,18 +32,12 @@ def routes(task: str) -> list[set[str]] | None:
     return ROUTES.get("keydoor" if task.startswith("keydoor_n") else task.removesuffix("_incorrect"))
 
 
-def steps_to_success(metrics: pd.DataFrame, level: float = 0.9, window: int = 20) -> float:
-    rate = metrics["success"].rolling(window, min_periods=window).mean()
-    hit = metrics.loc[rate >= level, "env_steps"]
-    return float(hit.iloc[0]) if len(hit) else math.nan
-
-
-def mean_se(values: list[float]) -> str:
-    v = np.asarray([x for x in values if not math.isnan(x)], dtype=float)
-    if len(v) == 0:
+def fmt(values) -> str:
+    """``mean ± s.e.`` of the finite values, steps with thousands separators."""
+    m, se = mean_se(values)
+    if math.isnan(m):
         return "–"
-    se = v.std(ddof=1) / math.sqrt(len(v)) if len(v) > 1 else 0.0
-    return f"{v.mean():.4g} ± {se:.2g}" if abs(v.mean()) < 10 else f"{v.mean():,.0f} ± {se:,.0f}"
+    return f"{m:.4g} ± {se:.2g}" if abs(m) < 10 else f"{m:,.0f} ± {se:,.0f}"
 
 
 def main() -> None:
@@ -65,7 +59,7 @@ def main() -> None:
                 if var_dir.name == "hdqn" and not (run / "learning_curve.png").exists():
                     continue
                 row = {"task": task_dir.name, "variant": var_dir.name, "seed": run.name,
-                       "mean_return": float(m["return"].mean()), "steps90": steps_to_success(m),
+                       "mean_return": float(m["return"].mean()), "steps90": steps_to(m.to_dict("records")),
                        "wall": float(m["wall_time"].iloc[-1])}
                 if not args.no_eval:
                     from hubsgo_ppl.experiments.run import evaluate
@@ -86,12 +80,12 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for (task, var), g in df.groupby(["task", "variant"], sort=False):
         one = g["one_route"].sum() if "one_route" in g and g["one_route"].notna().any() else None
-        print(f"| {task} | {var} | {len(g)} | {mean_se(list(g['mean_return']))} | {mean_se(list(g['steps90']))} | "
-              f"{int(g['steps90'].isna().sum())} | {mean_se(list(g.get('greedy_frac', pd.Series([math.nan]))))} | "
+        print(f"| {task} | {var} | {len(g)} | {fmt(list(g['mean_return']))} | {fmt(list(g['steps90']))} | "
+              f"{int(g['steps90'].isna().sum())} | {fmt(list(g.get('greedy_frac', pd.Series([math.nan]))))} | "
               f"{'' if one is None else f'{int(one)}/{len(g)}'} | "
-              f"{mean_se(list(g['p_top'])) if 'p_top' in g and g['p_top'].notna().any() else ''} | "
-              f"{mean_se(list(g['p_second'])) if 'p_second' in g and g['p_second'].notna().any() else ''} | "
-              f"{mean_se(list(g['wall']))} |")
+              f"{fmt(list(g['p_top'])) if 'p_top' in g and g['p_top'].notna().any() else ''} | "
+              f"{fmt(list(g['p_second'])) if 'p_second' in g and g['p_second'].notna().any() else ''} | "
+              f"{fmt(list(g['wall']))} |")
     if "top" in df:
         print()
         for _, r in df[df["top"].notna()].iterrows():

@@ -87,8 +87,9 @@ class CriticFilter:
         self.keep_fraction = float(keep_fraction)
         self._mask: np.ndarray | None = None   # None until the first update: Ĝt = G0
         self._outcomes: deque[np.ndarray] = deque(maxlen=int(outcome_window))
+        self._outcome_tensor = torch.zeros(0, critic.n)   # the window as the critic reads it (E, N)
         self._keep = np.zeros(critic.n, dtype=bool)
-        self._needs_outcomes = getattr(critic.likelihood, "evidence", "td") == "outcomes"
+        self._needs_outcomes = critic.likelihood.evidence == "outcomes"
 
     def allowed(self, achieved: np.ndarray | None = None) -> np.ndarray | None:
         """The mode of the last update's samples; given ``achieved``, the mode of those samples that
@@ -106,20 +107,22 @@ class CriticFilter:
         if not success:
             return
         self._outcomes.append(np.asarray(visited, dtype=bool).copy())
-        self._refresh_keep()
+        self._window_changed()
 
-    def _refresh_keep(self) -> None:
-        if self.keep_fraction <= 0 or not self._outcomes:
+    def _window_changed(self) -> None:
+        """Rebuild what depends on the window (once per successful episode, not per update)."""
+        if not self._outcomes:
+            self._outcome_tensor = torch.zeros(0, self.critic.n)
             self._keep = np.zeros(self.critic.n, dtype=bool)
             return
-        share = np.mean(np.stack(self._outcomes), axis=0)
-        self._keep = share >= self.keep_fraction
+        window = np.stack(self._outcomes)
+        self._outcome_tensor = torch.as_tensor(window, dtype=torch.float32)
+        self._keep = (window.mean(axis=0) >= self.keep_fraction if self.keep_fraction > 0
+                      else np.zeros(self.critic.n, dtype=bool))
 
     def outcomes(self) -> torch.Tensor:
         """The achieved sets of the recent successful episodes, (E, N) float, oldest first."""
-        if not self._outcomes:
-            return torch.zeros(0, self.critic.n)
-        return torch.as_tensor(np.stack(self._outcomes), dtype=torch.float32)
+        return self._outcome_tensor
 
     def update(self, batch: HighLevelBatch) -> dict[str, float]:
         """One critic update on the minibatch. The TDBatch itself goes to the critic, not its
@@ -148,7 +151,7 @@ class CriticFilter:
     def state_dict(self) -> dict[str, Any]:
         return {"critic": self.critic.state_dict(),
                 "mask": None if self._mask is None else torch.as_tensor(self._mask),
-                "outcomes": self.outcomes()}
+                "outcomes": self.outcomes().clone()}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.critic.load_state_dict(state["critic"])
@@ -156,4 +159,4 @@ class CriticFilter:
         self._outcomes.clear()
         for row in state.get("outcomes", torch.zeros(0, self.critic.n)):
             self._outcomes.append(row.numpy().astype(bool))
-        self._refresh_keep()
+        self._window_changed()
