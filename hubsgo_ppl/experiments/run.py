@@ -41,6 +41,8 @@ import torch
 from .. import __version__
 from ..agents.config import ConfigError, resolve_hyper
 from ..agents.factory import build_agent
+from ..agents.filters import CriticFilter
+from ..agents.loop import HRLLoop
 from ..agents.seeding import CRITIC_STREAM, EVAL_SEED_OFFSET, episode_seed, stream_seed
 from ..envs import get_task, register
 from ..envs.subset import catalogue_order, check_subset, make_subset
@@ -213,7 +215,7 @@ def _restore(path: Path, ckpt: dict[str, Any], steps: int | None = None):
     except BaseException:
         env.close()
         raise
-    if steps is not None and hasattr(agent, "cfg") and hasattr(agent.cfg, "total_steps"):
+    if steps is not None:       # every Trainer's cfg is a Budget (agents/protocols.py)
         agent.cfg.total_steps = int(steps)
     return env, agent
 
@@ -316,7 +318,7 @@ def train(cfg: RunConfig, out: str | Path, resume: bool = False, progress: bool 
         closing.callback(logger.close)
         logger.outputs.append(TensorBoardOutput(out / "tb", purge_step=purge))
         history = CSVOutput(out / "critic_history.csv")
-        has_critic = hasattr(agent, "filter") and hasattr(agent.filter, "critic")
+        has_critic = isinstance(agent, HRLLoop) and isinstance(agent.filter, CriticFilter)
 
         bar = None
         if progress:
