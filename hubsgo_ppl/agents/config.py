@@ -10,8 +10,9 @@ section    runtime settings
 =========  =====================================================================================
 ``loop``   :class:`~.loop.LoopConfig` (HRL loop; ``total_steps`` comes from ``steps``)
 ``high``   :class:`~.high_level.HighLevelConfig`
-``low``    :class:`~.low_level.GoalDQNConfig` (grids), :class:`~.td3_her.GoalTD3Config` (learned
-           arm low level) or :class:`~.scripted_osc.ScriptedOSC` (scripted arm low level)
+``low``    :class:`~.low_level.GoalDQNConfig` (grids), :class:`~.scripted_maze.ScriptedMaze` (scripted
+           grid low level), :class:`~.td3_her.GoalTD3Config` (learned arm low level) or
+           :class:`~.scripted_osc.ScriptedOSC` (scripted arm low level)
 ``hiro``   :class:`~.hiro.HIROConfig` (``total_steps`` comes from ``steps``)
 ``dqn``,   keyword arguments of Stable-Baselines3's DQN, PPO, TD3 (names only), plus ``unit_steps``
 ``ppo``,   (:mod:`.flat`) and, for ``td3``, ``noise_sigma``
@@ -187,7 +188,9 @@ def section_classes(agent: str, family: str, low_level: str) -> dict[str, type]:
         from .high_level import HighLevelConfig
         from .loop import LoopConfig
 
-        if low_level == "scripted":
+        if low_level == "scripted" and family == "minigrid":
+            from .scripted_maze import ScriptedMaze as low
+        elif low_level == "scripted":
             from .scripted_osc import ScriptedOSC as low
         elif family == "minigrid":
             from .low_level import GoalDQNConfig as low
@@ -247,9 +250,17 @@ def resolve_hyper(family: str, task: str | None, agent: str, overrides: list[str
     hyper = preset(family, task)
     if steps is not None:
         hyper["steps"] = int(steps)
+    default_low = hyper.get("low_level")
     if low_level is not None:
         hyper["low_level"] = low_level
     base, hyper = hyper, apply_overrides(hyper, list(overrides))
+    if hyper.get("low_level") != default_low and "low" in hyper:
+        # the preset's low section is the family default low level's; another low level gets only what
+        # --set gives it
+        given = {item.partition("=")[0].strip().split(".", 1)[1] for item in overrides
+                 if item.partition("=")[0].strip().startswith("low.")}
+        hyper["low"] = {k: v for k, v in hyper["low"].items() if k in given}
+        base = {**base, "low": {k: v for k, v in base["low"].items() if k in given}}
     models = _models(agent, family, str(hyper.get("low_level", "learned")))
     for item in overrides:
         try:

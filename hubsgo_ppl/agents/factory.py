@@ -38,6 +38,10 @@ def _low_level(kind: str, env: gym.Env, n_goals: int, low_cfg: dict, gen: torch.
         potential = getattr(env.unwrapped, "subgoal_potential", lambda: None)()
         return GoalDQN(obs_dim, n_goals, int(env.action_space.n), make_config("low", GoalDQNConfig, low_cfg), gen,
                        rng, potential=potential)
+    if kind == "scripted" and isinstance(env.action_space, gym.spaces.Discrete):
+        from .scripted_maze import ScriptedMaze
+
+        return ScriptedLowLevel(make_config("low", ScriptedMaze, low_cfg))
     if kind == "scripted":
         from .scripted_osc import ScriptedOSC
 

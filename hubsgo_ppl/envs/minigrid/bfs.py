@@ -23,9 +23,10 @@ from ...specs import SpecError
 from ..subgoals import Catalogue
 from .layout import MazeSpec, MazeState, load_maze_spec
 
-__all__ = ["plan", "optimal_steps", "optimal_return", "transition", "holds", "shortest_path_cells"]
+__all__ = ["plan", "plan_or_none", "optimal_steps", "optimal_return", "transition", "holds", "shortest_path_cells"]
 
 _DIR_VEC = ((1, 0), (0, 1), (-1, 0), (0, -1))
+_MOVES = ("left", "right", "forward")
 MAX_STATES = 2_000_000
 
 
@@ -133,7 +134,11 @@ def _resolve(source: Any, start_dir: int | None) -> tuple[MazeSpec, list[MazeSta
     return spec, [spec.initial_state(d) for d in dirs], 0
 
 
-def _bfs(spec: MazeSpec, start: MazeState, done: Callable[[MazeState], bool]) -> list[int] | None:
+def _bfs(spec: MazeSpec, start: MazeState, done: Callable[[MazeState], bool],
+         max_states: int = MAX_STATES, strict: bool = True, moves_only: bool = False) -> list[int] | None:
+    """The shortest action path from ``start`` to a state where ``done`` holds; None if there is none.
+    Past ``max_states`` visited states: RuntimeError, or None with ``strict=False``. ``moves_only``:
+    only turns and forward steps, except a last action (pickup, toggle, ...) that makes ``done`` hold."""
     m = _Maze(spec)
     if done(start):
         return []
@@ -146,7 +151,7 @@ def _bfs(spec: MazeSpec, start: MazeState, done: Callable[[MazeState], bool]) ->
             continue
         for a, name in enumerate(m.actions):
             t = transition(m, s, name)
-            if t in parent:
+            if t in parent or (moves_only and name not in _MOVES and not done(t)):
                 continue
             parent[t] = (s, a)
             if done(t):
@@ -156,7 +161,9 @@ def _bfs(spec: MazeSpec, start: MazeState, done: Callable[[MazeState], bool]) ->
                     path.append(act)
                 return path[::-1]
             frontier.append(t)
-        if len(parent) > MAX_STATES:
+        if len(parent) > max_states:
+            if not strict:
+                return None
             raise RuntimeError(f"{spec.source}: BFS visited over {MAX_STATES} states; the maze is too "
                                f"large to plan exactly")
     return None
@@ -195,6 +202,16 @@ def plan(source: Any, subgoal: str | int | None = None, start_dir: int | None = 
         what = "the goal" if subgoal is None else f"sub-goal {subgoal!r}"
         raise ValueError(f"{spec.source}: {what} is unreachable from {starts[0]}")
     return path
+
+
+def plan_or_none(env: Any, subgoal: int, max_states: int = MAX_STATES) -> list[int] | None:
+    """The shortest way from a reset env's current state to catalogue sub-goal ``subgoal`` by moving
+    (turns and forward steps) and, last, one action that makes the sub-goal hold (picking up its key,
+    opening its door); None where there is none or the search passes ``max_states`` states. Keys and
+    doors on the way are left as they are: reaching the goal behind a closed door is not one option.
+    (A scripted low level's query; :func:`plan` plans the whole task.)"""
+    spec, starts, _ = _resolve(env, None)
+    return _bfs(spec, starts[0], _target(spec, subgoal), max_states=max_states, strict=False, moves_only=True)
 
 
 def optimal_steps(source: Any, start_dir: int | None = None) -> int:
