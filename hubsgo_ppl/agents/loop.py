@@ -53,8 +53,9 @@ class LoopConfig:
     filter_fraction: float = 0.5
     # the filter keeps the achieved sets of the last outcome_window successful episodes (the evidence
     # of outcome likelihoods); Ĝt always holds the sub-goals achieved in at least filter_keep of them
+    # (1: in every one of them)
     outcome_window: int = 20
-    filter_keep: float = 0.5
+    filter_keep: float = 1.0
     eval_filter: float = 1.0                    # greedy evaluation chooses from Ĝt with this probability
     # h-DQN's per-goal annealing (Kulkarni et al. 2016): the low level's ε for goal g is at least
     # min(low_explore_cap, 1 - its recent success rate on g), so goals it cannot reach yet keep being

@@ -83,6 +83,20 @@ def test_safeguard_keeps_what_the_recent_successes_needed():
     assert torch.equal(g.outcomes(), f.outcomes()) and (g.allowed() == f.allowed()).all()
 
 
+def test_default_safeguard_keeps_what_every_recent_success_achieved():
+    f = CriticFilter(goal_dropping_critic(), outcome_window=3)       # keep_fraction 1: the intersection
+    f.update(batches(1)[0])
+    f.end_episode(np.array([False, False, True, True, True]), success=True)
+    assert f.allowed().tolist() == [True, True, True, True, True]          # one success: all it achieved
+    f.end_episode(np.array([False, False, True, False, True]), success=True)
+    assert f.allowed().tolist() == [True, True, True, False, True]         # b2 missed once: the critic's call
+    for _ in range(2):                                                     # the first success leaves the window
+        f.end_episode(np.array([False, False, True, True, True]), success=True)
+    assert f.allowed().tolist() == [True, True, True, False, True]         # still missed by one of the three
+    f.end_episode(np.array([False, False, True, True, True]), success=True)
+    assert f.allowed().tolist() == [True, True, True, True, True]
+
+
 def test_safeguard_can_be_turned_off_and_bad_values_are_refused():
     f = CriticFilter(goal_dropping_critic(), keep_fraction=0.0)
     f.update(batches(1)[0])
