@@ -1,4 +1,4 @@
-"""The MiniGrid acceptance figures (docs/results.md, "MiniGrid acceptance") from a sweep folder that
+"""The MiniGrid acceptance figures (docs/results.md, "Why the loop conditions Ĝt and breaks low-level cycles") from a sweep folder that
 holds the runs of sweeps/keydoor_acceptance.yaml and sweeps/minigrid_acceptance.yaml:
 
     .venv/bin/hubsgo sweep sweeps/keydoor_acceptance.yaml --workers 2 --out runs/sweeps/acceptance

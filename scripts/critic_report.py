@@ -3,7 +3,8 @@
 For every task x variant over the seeds found: the mean return over training, the env steps until the
 success rate over the last 20 episodes first reaches 0.9 ("never" counts are given), the greedy return
 as a fraction of the BFS optimum (``hubsgo evaluate``, 5 episodes), and for HUBS-GO whether G*'s top
-set is exactly one route, with its probability and the runner-up's. Mean ± s.e. over seeds.
+set is exactly one route (on the arm tasks: one consistent plan, ``PLANS``), with its probability and
+the runner-up's. Mean ± s.e. over seeds.
 
     python scripts/critic_report.py runs/sweeps/critic [--tasks keydoor threepair ...] [--no-eval]
 """
@@ -30,6 +31,35 @@ ROUTES = {
 
 def routes(task: str) -> list[set[str]] | None:
     return ROUTES.get("keydoor" if task.startswith("keydoor_n") else task.removesuffix("_incorrect"))
+
+
+# The arm tasks' consistent plans: a test on the top set rather than a list of sets, because the
+# reach-above sub-goals are optional on the way (a grasp or a push starts above its cube anyway).
+_STACK_CHAIN = {"grasp_red", "place_red_on_target", "grasp_green", "place_green_on_red"}
+
+
+def _one_push(top: set[str]) -> bool:
+    pushes = {n for n in top if n.startswith("push_")}
+    if len(pushes) != 1:
+        return False
+    colour = next(iter(pushes)).split("_")[1]
+    return pushes == {f"push_{colour}_to_{colour}"} and top - pushes <= {f"reach_{colour}"}
+
+
+PLANS = {
+    "stack_cubes": lambda top: _STACK_CHAIN <= top <= _STACK_CHAIN | {"reach_above_red", "reach_above_green"},
+    "push_any_one": _one_push,
+    "collect_three_balls": lambda top: top in ({"collect_ball_0", "collect_ball_1", "collect_ball_2"},
+                                               {"collect_ball_3", "collect_ball_4", "collect_ball_5"}),
+}
+
+
+def consistent(task: str, top: set[str]) -> bool | None:
+    """Whether G*'s top set is one route (mazes) or one consistent plan (arm tasks); None if unknown."""
+    if task in PLANS:
+        return PLANS[task](top)
+    ok = routes(task)
+    return None if ok is None else top in ok
 
 
 def fmt(values) -> str:
@@ -70,8 +100,7 @@ def main() -> None:
                     table = json.loads((run / "subgoals.json").read_text())
                     ranking = table.get("ranking") or table.get("top")
                     top = set(ranking[0]["subgoals"])
-                    ok = routes(task_dir.name)
-                    row["one_route"] = None if ok is None else top in ok
+                    row["one_route"] = consistent(task_dir.name, top)
                     row["top"] = "{" + ", ".join(ranking[0]["subgoals"]) + "}"
                     row["p_top"], row["p_second"] = ranking[0]["prob"], ranking[1]["prob"] if len(ranking) > 1 else 0.0
                 rows.append(row)
