@@ -86,7 +86,7 @@ def cell(sel: list[dict], key: str) -> str:
     """``mean ± s.e.`` of ``key`` over the rows ``sel`` (steps with thousands separators and how many
     rows reached the level)."""
     m, se = mean_se(r[key] for r in sel)
-    if key != "steps_to_90":
+    if not key.endswith("steps_to_90"):
         return "-" if math.isnan(m) else f"{m:.3f} ± {se:.3f}"
     reached = sum(math.isfinite(float(r[key])) for r in sel)
     return ("-" if math.isnan(m) else f"{m:,.0f} ± {se:,.0f}") + f" ({reached}/{len(sel)} reached)"

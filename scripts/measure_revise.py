@@ -11,7 +11,9 @@ script runs it. For each task with misleading sub-goals and each seed, at the ta
 
 Per arm it reports, as mean ± standard error over the seeds: the success rate over the last 20
 episodes, the mean return over the last third of the budget, and the env steps until the rolling
-success rate (20 episodes) first reaches 90% (runs that never reach it are counted, not averaged).
+success rate (20 episodes) first reaches 90% (runs that never reach it are counted, not averaged), in
+the arm's own run and in total: a restart begins where the other two arms paused, so its total adds
+the B/3 steps spent before the pause.
 Everything goes under ``--out``: one folder per task, seed and arm, ``results.csv`` (one row per run)
 and ``summary.md``. Re-running skips finished runs (the runs are ordinary run directories).
 
@@ -103,14 +105,18 @@ def one(task: str, seed: int, out: Path, steps: int | None, overrides: list[str]
               runs["restart"], progress=False)
     dropped = [n for n in yaml.safe_load((runs["revised"] / "revisions" / "001" / "spec_before.yaml").read_text())["subgoals"]
                if n not in yaml.safe_load(spec_path.read_text())["subgoals"]]
-    return [{"task": task, "seed": seed, "arm": arm, "budget": budget, "dropped": " ".join(dropped),
+    rows = [{"task": task, "seed": seed, "arm": arm, "budget": budget, "dropped": " ".join(dropped),
              **run_stats(runs[arm], budget)} for arm in ARMS]
+    for row in rows:    # total env steps: a restart begins where the other two arms paused
+        row["total_steps_to_90"] = row["steps_to_90"] + (budget // 3 if row["arm"] == "restart" else 0)
+    return rows
 
 
 def summarise(rows: list[dict], path: Path) -> str:
     return summary_table(rows, lambda r: r["task"], ARMS,
-                         ["task", "arm", "seeds", "success, last 20 episodes", "return, last third", "steps to 90% success"],
-                         ["final_success", "late_return", "steps_to_90"], path)
+                         ["task", "arm", "seeds", "success, last 20 episodes", "return, last third",
+                          "steps to 90% success (own run)", "total env steps to 90% success"],
+                         ["final_success", "late_return", "steps_to_90", "total_steps_to_90"], path)
 
 
 def main(argv: list[str] | None = None) -> int:
