@@ -1,7 +1,9 @@
 """The critic's acceptance tables from a sweep folder (sweeps/critic_routes.yaml, critic_value.yaml).
 
 For every task x variant over the seeds found: the mean return over training, the env steps until the
-success rate over the last 20 episodes first reaches 0.9 ("never" counts are given), the greedy return
+success rate over the last 20 episodes first reaches 0.9 ("never" counts are given), the env step of
+the first success and the steps from it to 0.9 (an outcome critic acts only after the first success,
+so HUBS-GO and h-DQN share everything before it), the greedy return
 as a fraction of the BFS optimum (``hubsgo evaluate``, 5 episodes), and for HUBS-GO whether G*'s top
 set is exactly one route (on the arm tasks: one consistent plan, ``PLANS``), with its probability and
 the runner-up's. Mean ± s.e. over seeds.
@@ -88,9 +90,11 @@ def main() -> None:
                 m = pd.read_csv(run / "metrics.csv")
                 if var_dir.name == "hdqn" and not (run / "learning_curve.png").exists():
                     continue
+                first = float(m["env_steps"][m["success"].astype(bool).idxmax()]) if m["success"].any() else math.nan
                 row = {"task": task_dir.name, "variant": var_dir.name, "seed": run.name,
                        "mean_return": float(m["return"].mean()), "steps90": steps_to(m.to_dict("records")),
-                       "wall": float(m["wall_time"].iloc[-1])}
+                       "first": first, "wall": float(m["wall_time"].iloc[-1])}
+                row["after_first"] = row["steps90"] - first
                 if not args.no_eval:
                     from hubsgo_ppl.experiments.run import evaluate
 
@@ -105,12 +109,14 @@ def main() -> None:
                     row["p_top"], row["p_second"] = ranking[0]["prob"], ranking[1]["prob"] if len(ranking) > 1 else 0.0
                 rows.append(row)
     df = pd.DataFrame(rows)
-    print("| task | agent | seeds | mean return (training) | steps to 90% success | never | greedy / BFS optimum | G* one route | p(top) | p(runner-up) | wall s |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    print("| task | agent | seeds | mean return (training) | steps to 90% success | never | first success | "
+          "90% after first success | greedy / BFS optimum | G* one route | p(top) | p(runner-up) | wall s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for (task, var), g in df.groupby(["task", "variant"], sort=False):
         one = g["one_route"].sum() if "one_route" in g and g["one_route"].notna().any() else None
         print(f"| {task} | {var} | {len(g)} | {fmt(list(g['mean_return']))} | {fmt(list(g['steps90']))} | "
-              f"{int(g['steps90'].isna().sum())} | {fmt(list(g.get('greedy_frac', pd.Series([math.nan]))))} | "
+              f"{int(g['steps90'].isna().sum())} | {fmt(list(g['first']))} | {fmt(list(g['after_first']))} | "
+              f"{fmt(list(g.get('greedy_frac', pd.Series([math.nan]))))} | "
               f"{'' if one is None else f'{int(one)}/{len(g)}'} | "
               f"{fmt(list(g['p_top'])) if 'p_top' in g and g['p_top'].notna().any() else ''} | "
               f"{fmt(list(g['p_second'])) if 'p_second' in g and g['p_second'].notna().any() else ''} | "
