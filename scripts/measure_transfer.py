@@ -1,7 +1,8 @@
 """Measure what ``hubsgo train NEW_TASK --init-from RUN`` is worth on the similar-task pairs.
 
 A sweep file cannot express this (each target run starts from the source run of its seed), so this
-script runs it. For each pair (``keydoor -> keydoor_moved``, ``fourroom -> fourroom_moved``) and each
+script runs it. For each pair (``keydoor -> keydoor_moved``, ``fourroom -> fourroom_moved``,
+``threepair -> threepair_moved``) and each
 seed: a HUBS-GO run on the source task at its budget, then runs on the target task at its budget,
 one per arm:
 
@@ -14,7 +15,7 @@ rate (20 episodes) first reaches 90% (runs that never reach it are counted, not 
 success rate over the last 20 episodes. Everything goes under ``--out``: the runs, ``results.csv``
 (one row per target run) and ``summary.md``. Re-running skips finished runs.
 
-    .venv/bin/python scripts/measure_transfer.py --out runs/measure_transfer        # 2 pairs x 5 seeds x 5 arms
+    .venv/bin/python scripts/measure_transfer.py --out runs/measure_transfer        # 3 pairs x 5 seeds x 5 arms
     .venv/bin/python scripts/measure_transfer.py --out runs/smoke_transfer --smoke   # a pipeline check
 
 ``--smoke``: one seed, keydoor -> keydoor_moved only, 1,000 steps per run and tiny networks; it
@@ -29,7 +30,7 @@ from pathlib import Path
 from measure_common import SMOKE, WINDOW, finish, parser, run_jobs, output_dir, steps_to, summary_table  # noqa: E402  (a sibling script module)
 
 ROOT = Path(__file__).resolve().parents[1]
-PAIRS = {"keydoor": "keydoor_moved", "fourroom": "fourroom_moved"}
+PAIRS = {"keydoor": "keydoor_moved", "fourroom": "fourroom_moved", "threepair": "threepair_moved"}
 ARMS = {"scratch": None, "critic": ["critic"], "high": ["high"], "low": ["low"], "all": ["critic", "high", "low"]}
 
 

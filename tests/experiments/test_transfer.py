@@ -31,10 +31,11 @@ def _source(root, task, seed=0):
 @pytest.fixture(scope="module")
 def sources(tmp_path_factory):
     root = tmp_path_factory.mktemp("transfer")
-    return {task: _source(root, task) for task in ("keydoor", "fourroom")}
+    return {task: _source(root, task) for task in ("keydoor", "fourroom", "threepair")}
 
 
-@pytest.mark.parametrize("source, target", [("keydoor", "keydoor_moved"), ("fourroom", "fourroom_moved")])
+@pytest.mark.parametrize("source, target", [("keydoor", "keydoor_moved"), ("fourroom", "fourroom_moved"),
+                                            ("threepair", "threepair_moved")])
 def test_tiny_transfer_to_the_similar_task(sources, tmp_path, source, target):
     src = load_checkpoint(sources[source] / "checkpoint.pt")["agent"]
     assert src["filter"]["critic"]["num_updates"] > 0
@@ -66,7 +67,9 @@ def test_tiny_transfer_to_the_similar_task(sources, tmp_path, source, target):
     assert start["env_steps"] == 0 and start["episodes"] == 0
     init = yaml.safe_load((out / "config.yaml").read_text())["init_from"]
     assert init["task"] == source and init["parts"] == ["critic", "high", "low"]
-    assert init["mapped"]["high"]["outputs"] == "5/5" and init["mapped"]["critic"]["edges"] == f"{shared}/6"
+    n = len(critic["names"])
+    assert init["mapped"]["high"]["outputs"] == f"{n}/{n}"
+    assert init["mapped"]["critic"]["edges"] == f"{shared}/{len(critic['edges'])}"
 
     summary = train(cfg, out, resume=True, progress=False)   # and it trains on from there
     assert summary["finished"] and summary["env_steps"] >= 600
