@@ -4,8 +4,8 @@
 so that the high level and the critic are measured on their own: every reachable sub-goal is reached
 in the fewest steps, and a sub-goal that cannot be reached from the current state (a door whose key is
 not held, the goal behind a closed door) costs the whole option. The plan is a breadth-first search
-over the maze's symbolic state (:func:`hubsgo_ppl.envs.minigrid.bfs.plan`), made once per option and
-followed while the env stays on it.
+over the maze's symbolic state (:func:`hubsgo_ppl.envs.minigrid.bfs.plan_or_none`), made once per
+option.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from collections import deque
 
 import gymnasium as gym
 
-from ..envs.minigrid.bfs import plan_or_none, transition
+from ..envs.minigrid.bfs import plan_or_none
 
 __all__ = ["ScriptedMaze"]
 
@@ -37,29 +37,21 @@ class ScriptedMaze:
     def reset(self) -> None:
         """A new option starts: forget the plan."""
         self._goal: int | None = None
-        self._plan: deque[int] = deque()
-        self._next_state = None          # the symbolic state the plan expects before its next action
-        self._unreachable = False
+        self._plan: deque[int] | None = None     # None: not planned yet in this option
 
     def act(self, env: gym.Env, goal_index: int) -> int:
         """The next action of a shortest plan to sub-goal ``goal_index``; where there is none (the
         sub-goal is unreachable or already holds), a turn, which changes neither what is reachable nor
-        any sub-goal."""
+        any sub-goal. The maze is deterministic and only this controller acts during an option, so the
+        plan made at the option's first step stays valid to its end."""
         task = env.unwrapped
         if not hasattr(task, "symbolic_state"):
             raise TypeError(f"{type(task).__name__} is not a maze task; ScriptedMaze plans on MiniGrid mazes "
                             f"(hubsgo_ppl.envs.make('keydoor'))")
-        actions = list(task.spec_maze.options.actions)
-        state = task.symbolic_state()
-        if goal_index != self._goal:
-            self.reset()
+        if goal_index != self._goal or self._plan is None:
             self._goal = goal_index
-        if not self._unreachable and (not self._plan or state != self._next_state):
-            path = plan_or_none(task, goal_index, max_states=self.max_states)
-            self._plan = deque(path or [])
-            self._unreachable = not path
-        if not self._plan:
-            return actions.index("left") if "left" in actions else 0
-        action = self._plan.popleft()
-        self._next_state = transition(task.spec_maze, state, actions[action])
-        return int(action)
+            self._plan = deque(plan_or_none(task, goal_index, max_states=self.max_states) or [])
+        if self._plan:
+            return int(self._plan.popleft())
+        actions = task.spec_maze.options.actions
+        return actions.index("left") if "left" in actions else 0

@@ -164,7 +164,7 @@ def _bfs(spec: MazeSpec, start: MazeState, done: Callable[[MazeState], bool],
         if len(parent) > max_states:
             if not strict:
                 return None
-            raise RuntimeError(f"{spec.source}: BFS visited over {MAX_STATES} states; the maze is too "
+            raise RuntimeError(f"{spec.source}: BFS visited over {max_states} states; the maze is too "
                                f"large to plan exactly")
     return None
 
