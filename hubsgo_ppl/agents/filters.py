@@ -32,7 +32,14 @@ import torch
 
 from .high_level import HighLevelBatch
 
-__all__ = ["SubgoalFilter", "CriticFilter", "NoFilter"]
+__all__ = ["SubgoalFilter", "CriticFilter", "NoFilter", "BEFORE_UPDATE"]
+
+#: what Ĝt is before the critic's first update (with an outcome likelihood: before the first success):
+#: "g0", no filter; "completion", the configuration q favours most among those holding the sub-goals
+#: achieved so far. q starts at the prior, so the human's edges then steer the high level from the
+#: first episode: holding a key, Ĝt is its door and the goal; holding nothing, the completion is
+#: empty and the high level reads G0.
+BEFORE_UPDATE = ("g0", "completion")
 
 
 class SubgoalFilter(Protocol):
@@ -83,12 +90,16 @@ class CriticFilter:
 
     name = "critic"
 
-    def __init__(self, critic: Any, outcome_window: int = 20, keep_fraction: float = 1.0):
+    def __init__(self, critic: Any, outcome_window: int = 20, keep_fraction: float = 1.0,
+                 before_update: str = "g0"):
+        if before_update not in BEFORE_UPDATE:
+            raise ValueError(f"loop.filter_before_update must be one of {', '.join(BEFORE_UPDATE)}, got {before_update!r}")
         if int(outcome_window) < 1:
             raise ValueError(f"loop.outcome_window must be a positive integer, got {outcome_window!r}")
         if not 0.0 <= float(keep_fraction) <= 1.0:
             raise ValueError(f"loop.filter_keep must be in [0, 1] (0 turns the safeguard off), got {keep_fraction!r}")
         self.critic = critic
+        self.before_update = before_update
         self.keep_fraction = float(keep_fraction)
         self._mask: np.ndarray | None = None   # None until the first update: Ĝt = G0
         self._outcomes: deque[np.ndarray] = deque(maxlen=int(outcome_window))
@@ -100,9 +111,13 @@ class CriticFilter:
         """The mode of the last update's samples; given ``achieved``, the mode of those samples that
         include every achieved sub-goal (``SubgoalCritic.filtered_set``), so that a route the agent
         has committed to (it holds the blue key) is the one Ĝt names. Either way joined with the
-        safeguard's sub-goals."""
+        safeguard's sub-goals. Before the critic's first update: G0 (None), or with ``before_update``
+        "completion" q's completion of the achieved sub-goals (``SubgoalCritic.completion``)."""
         if self._mask is None:
-            return None
+            if self.before_update == "g0":
+                return None
+            given = np.zeros(self.critic.n, dtype=bool) if achieved is None else np.asarray(achieved, dtype=bool)
+            return self.critic.completion(torch.as_tensor(given)).cpu().numpy().astype(bool) | self._keep
         if achieved is None:
             return self._mask | self._keep
         given = torch.as_tensor(np.asarray(achieved, dtype=bool))

@@ -56,6 +56,9 @@ class LoopConfig:
     # (1: in every one of them)
     outcome_window: int = 20
     filter_keep: float = 1.0
+    # Ĝt before the critic's first update: "g0" (no filter) or "completion" (q's completion of the
+    # achieved sub-goals, q being the prior then; agents/filters.py, BEFORE_UPDATE)
+    filter_before_update: str = "g0"
     eval_filter: float = 1.0                    # greedy evaluation chooses from Ĝt with this probability
     # h-DQN's per-goal annealing (Kulkarni et al. 2016): the low level's ε for goal g is at least
     # min(low_explore_cap, 1 - its recent success rate on g), so goals it cannot reach yet keep being

@@ -74,6 +74,42 @@ class CriticReadout:
         best = torch.where(agree.any(-1), best, torch.full_like(best, mode))
         return configs[best].bool().reshape(given.shape)
 
+    def completion(self, given: torch.Tensor) -> torch.Tensor:
+        """The configuration of highest log q reachable from ``given`` by single flips, with every given
+        sub-goal held on: greedy coordinate ascent (iterated conditional modes) that flips, one at a
+        time, the free site that raises log q most, until no flip raises it. BoolTensor with
+        ``given``'s shape ((N,) or (B, N)); a local maximum of q(w | w_given = 1), exact where q is a
+        forest of attractive edges.
+
+        Before any evidence q is the prior (``inference.init: prior``), so this is what the human's
+        edges say completes what the agent already holds: with a key's positive edge to its door and
+        the door's to the goal (field -2, strength 3), holding the key gives {key, door, goal}; holding
+        nothing gives the empty set, every single flip from it lowering log q.
+        """
+        given = torch.as_tensor(given, dtype=torch.bool)
+        if given.shape[-1] != self.n or given.dim() not in (1, 2):
+            raise ValueError(f"given must have shape ({self.n},) or (B, {self.n}), got {tuple(given.shape)}")
+        rows = given.reshape(-1, self.n)
+        theta = self._theta.detach().double()
+        J = torch.zeros(self.n, self.n, dtype=torch.float64)
+        if self._edge_index.numel():
+            u, v = self._edge_index[:, 0], self._edge_index[:, 1]
+            c = self._coupling.detach().double()
+            J[u, v] = c
+            J[v, u] = c
+        w = rows.double()
+        free = ~rows
+        arange = torch.arange(rows.shape[0])
+        for _ in range(2 * self.n + 1):            # each flip raises log q; a bound against float cycles
+            gain = (1.0 - 2.0 * w) * (theta + w @ J)                  # log q change of flipping each site
+            gain = torch.where(free, gain, torch.full_like(gain, -math.inf))
+            best = gain.argmax(-1)
+            up = gain[arange, best] > 0
+            if not bool(up.any()):
+                break
+            w[arange[up], best[up]] = 1.0 - w[arange[up], best[up]]
+        return w.bool().reshape(given.shape)
+
     def _sample_counts(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """``(samples, configs, counts)``: the distinct configurations among the last update's samples
         (the chain states before any update), in lexicographic order, and how often each occurs.

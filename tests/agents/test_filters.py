@@ -152,3 +152,29 @@ def test_critic_filter_is_g0_until_its_first_update_then_the_critics_mode():
     fresh = CriticFilter(critic(seed=9))
     fresh.load_state_dict(f.state_dict())
     assert fresh.allowed().tolist() == mode.tolist()
+
+
+def test_before_its_first_update_the_filter_can_read_the_priors_completion():
+    graph = SubgoalGraph(["yk", "yd", "bk", "bd", "goal", "x"],
+                         [("yk", "yd", 1), ("bk", "bd", 1), ("yk", "bk", -1), ("yd", "bd", -1),
+                          ("yd", "goal", 1), ("bd", "goal", 1)])
+    from hubsgo_ppl.infer.critic import InferenceConfig
+
+    def prior_critic():
+        return SubgoalCritic(graph, prior="ising", prior_params={"strength": 3.0, "field": -2.0},
+                             likelihood="outcome", config=InferenceConfig(init="prior"), seed=0)
+
+    f = CriticFilter(prior_critic(), before_update="completion")
+    holds_bk = np.array([False, False, True, False, False, False])
+    assert f.allowed(holds_bk).tolist() == [False, False, True, True, True, False]
+    rows = np.stack([holds_bk, np.zeros(6, dtype=bool)])
+    assert f.allowed(rows).tolist() == [[False, False, True, True, True, False], [False] * 6]
+    assert not f.allowed().any()                      # holding nothing: empty, and the loop reads G0
+    assert CriticFilter(prior_critic()).allowed(holds_bk) is None      # the default: G0 until the first update
+    f.end_episode(np.array([True, True, False, False, True, False]), success=True)
+    q = torch.rand(16, 6, generator=torch.Generator().manual_seed(0))
+    f.update(TDBatch(q[:, 0], q, torch.zeros(16), torch.full((16,), 0.9)))   # after it: the critic's mode
+    assert f.allowed(holds_bk).tolist() == (f.critic.filtered_set(given=torch.as_tensor(holds_bk)).numpy()
+                                            | f._keep).tolist()
+    with pytest.raises(ValueError, match="filter_before_update must be one of g0, completion"):
+        CriticFilter(prior_critic(), before_update="prior")

@@ -63,3 +63,61 @@ def test_marginals_above_the_exact_limit_are_the_last_samples_mean():
     assert critic.marginals().tolist() == [1.0, 0.5, 0.0, 0.5]
     exact = _critic().marginals()
     assert torch.allclose(exact, (critic.log_q(state_table(4)).exp()[:, None] * state_table(4)).sum(0), atol=1e-5)
+
+
+def _local_maxima(c, given):
+    """Every configuration holding ``given`` that no single flip of a free site improves under log q,
+    by enumeration of the 2^N states (log q's differences are exact: log Z cancels)."""
+    states = state_table(c.n).float()
+    lq = c.log_q(states)
+    code = {tuple(s.int().tolist()): float(v) for s, v in zip(states, lq)}
+    out = []
+    for s in states:
+        if not bool((s.bool() | ~given).all()):
+            continue
+        key = tuple(s.int().tolist())
+        flips = [tuple(1 - b if j == i else b for j, b in enumerate(key)) for i in range(c.n) if not given[i]]
+        if all(code[f] <= code[key] + 1e-6 for f in flips):
+            out.append(key)
+    return out, code
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_completion_is_a_local_maximum_of_q_given_the_achieved(seed):
+    g = torch.Generator().manual_seed(seed)
+    n = 7
+    edges = [(f"s{u}", f"s{v}", 1 if torch.rand(1, generator=g) > 0.3 else -1)
+             for u in range(n) for v in range(u + 1, n) if torch.rand(1, generator=g) < 0.4]
+    c = SubgoalCritic(SubgoalGraph([f"s{i}" for i in range(n)], edges), seed=seed)
+    sd = c.state_dict()
+    sd["theta"] = torch.randn(n, generator=g) * 2
+    sd["coupling"] = (torch.rand(len(edges), generator=g) * 4) * torch.tensor([float(s) for *_, s in edges])
+    c.load_state_dict(sd)
+    given = torch.rand(4, n, generator=g) < 0.2
+    comp = c.completion(given)
+    assert comp.shape == given.shape and comp.dtype == torch.bool
+    assert bool((comp | ~given).all())                               # the given stay on
+    for row, out in zip(given, comp):
+        maxima, code = _local_maxima(c, row)
+        assert tuple(out.int().tolist()) in maxima
+    assert c.completion(given[0]).tolist() == comp[0].tolist()       # (N,) in, (N,) out
+
+
+def test_completion_of_a_key_door_prior_is_the_route_of_the_key_held():
+    graph = SubgoalGraph(["yk", "yd", "bk", "bd", "goal"] + [f"x{i}" for i in range(6)],
+                         [("yk", "yd", 1), ("bk", "bd", 1), ("yk", "bk", -1), ("yd", "bd", -1),
+                          ("yd", "goal", 1), ("bd", "goal", 1)])
+    c = SubgoalCritic(graph, prior="ising", prior_params={"strength": 3.0, "field": -2.0},
+                      config=InferenceConfig(init="prior"), seed=0)
+    names = list(graph.names)
+
+    def complete(*held):
+        mask = c.completion(torch.tensor([nm in held for nm in names]))
+        return {nm for nm, m in zip(names, mask.tolist()) if m}
+
+    assert complete() == set()                          # holding nothing: every flip lowers log q
+    assert complete("bk") == {"bk", "bd", "goal"}
+    assert complete("yk") == {"yk", "yd", "goal"}
+    assert complete("yk", "bd") == {"yk", "yd", "bd", "goal"}   # the given stay on even against an edge
+    with pytest.raises(ValueError, match="given must have shape"):
+        c.completion(torch.zeros(3, dtype=torch.bool))
