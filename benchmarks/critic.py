@@ -114,12 +114,14 @@ def pyro_floor(spec: str = "fourroom-specific", rounds: int = 5, repeats: int = 
     g = torch.Generator().manual_seed(1)
     batch = TDBatch(torch.rand(64, generator=g), torch.rand(64, n, generator=g), torch.zeros(64),
                     torch.full((64,), 0.9), available=torch.rand(64, n, generator=g) > 0.2)
+    if critic.likelihood.evidence == "outcomes":    # the shipped specs: 20 recent successes' achieved sets
+        batch.outcomes = (torch.rand(20, n, generator=g) > 0.5).float()
     theta = torch.zeros(n, requires_grad=True)
 
-    def model():
+    def model():                # Pyro's own step on the same particles, with Eq. 4's Gaussian on the residuals
         w = pyro.sample("w", dist.Bernoulli(torch.full((n,), 0.5)).to_event(1))
         r = batch.residuals(w)
-        pyro.sample("td", critic.likelihood.distribution(r).to_event(1), obs=torch.zeros(r.shape))
+        pyro.sample("td", dist.Normal(r, 0.1).to_event(1), obs=torch.zeros(r.shape))
 
     def guide():
         pyro.sample("w", dist.Bernoulli(logits=pyro.param("theta", theta)).to_event(1),
