@@ -78,8 +78,8 @@ class CriticReadout:
         """The configuration of highest log q reachable from ``given`` by single flips, with every given
         sub-goal held on: greedy coordinate ascent (iterated conditional modes) that flips, one at a
         time, the free site that raises log q most, until no flip raises it. BoolTensor with
-        ``given``'s shape ((N,) or (B, N)); a local maximum of q(w | w_given = 1), exact where q is a
-        forest of attractive edges.
+        ``given``'s shape ((N,) or (B, N)); a local maximum of q(w | w_given = 1), not necessarily the
+        global one (a set that only several flips together make more probable is not reached).
 
         Before any evidence q is the prior (``inference.init: prior``), so this is what the human's
         edges say completes what the agent already holds: with a key's positive edge to its door and
