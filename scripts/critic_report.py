@@ -124,7 +124,7 @@ def main() -> None:
     if "top" in df:
         print()
         for _, r in df[df["top"].notna()].iterrows():
-            print(f"- {r['task']} {r['seed']}: {r['top']} p {r['p_top']:.3f} (runner-up {r['p_second']:.3f})")
+            print(f"- {r['task']} {r['variant']} {r['seed']}: {r['top']} p {r['p_top']:.3f} (runner-up {r['p_second']:.3f})")
 
 
 if __name__ == "__main__":
