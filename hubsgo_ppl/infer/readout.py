@@ -13,7 +13,7 @@ import math
 import numpy as np
 import torch
 
-from ..distributions.mh_kernels import run_chains
+from ..distributions.mh_kernels import coupling_matrix, run_chains
 from ..distributions.mrf import EXACT_LIMIT, PairwiseMRF
 
 __all__ = ["CriticReadout", "unique_rows", "RANKING_DRAWS", "MARGINAL_CHAINS", "INDEPENDENT_BURN_IN_FACTOR",
@@ -65,14 +65,19 @@ class CriticReadout:
         mode = int(counts.argmax())
         if given is None:
             return configs[mode].bool()
-        given = torch.as_tensor(given, dtype=torch.bool)
-        if given.shape[-1] != self.n or given.dim() not in (1, 2):
-            raise ValueError(f"given must have shape ({self.n},) or (B, {self.n}), got {tuple(given.shape)}")
+        given = self._given_rows(given)
         rows = given.reshape(-1, self.n)
         agree = (configs.bool()[None] | ~rows[:, None]).all(-1)                 # (B, U)
         best = torch.where(agree, counts[None], torch.zeros_like(counts)[None]).argmax(-1)
         best = torch.where(agree.any(-1), best, torch.full_like(best, mode))
         return configs[best].bool().reshape(given.shape)
+
+    def _given_rows(self, given) -> torch.Tensor:
+        """``given`` as a bool tensor of shape (N,) or (B, N); any other shape is refused."""
+        given = torch.as_tensor(given, dtype=torch.bool)
+        if given.shape[-1] != self.n or given.dim() not in (1, 2):
+            raise ValueError(f"given must have shape ({self.n},) or (B, {self.n}), got {tuple(given.shape)}")
+        return given
 
     def completion(self, given: torch.Tensor) -> torch.Tensor:
         """The configuration of highest log q reachable from ``given`` by single flips, with every given
@@ -86,17 +91,10 @@ class CriticReadout:
         the door's to the goal (field -2, strength 3), holding the key gives {key, door, goal}; holding
         nothing gives the empty set, every single flip from it lowering log q.
         """
-        given = torch.as_tensor(given, dtype=torch.bool)
-        if given.shape[-1] != self.n or given.dim() not in (1, 2):
-            raise ValueError(f"given must have shape ({self.n},) or (B, {self.n}), got {tuple(given.shape)}")
+        given = self._given_rows(given)
         rows = given.reshape(-1, self.n)
         theta = self._theta.detach().double()
-        J = torch.zeros(self.n, self.n, dtype=torch.float64)
-        if self._edge_index.numel():
-            u, v = self._edge_index[:, 0], self._edge_index[:, 1]
-            c = self._coupling.detach().double()
-            J[u, v] = c
-            J[v, u] = c
+        J = coupling_matrix(self._coupling.detach().double(), self._edge_index, self.n)
         w = rows.double()
         free = ~rows
         arange = torch.arange(rows.shape[0])
