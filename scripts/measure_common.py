@@ -51,7 +51,7 @@ def write_rows(rows: list[dict], path) -> None:
 
 
 def parser(doc: str, smoke: str):
-    """The options both measurements take: --out, --seeds, --steps, --workers, --smoke."""
+    """The options both measurements take: --out, --seeds, --steps, --workers, --set, --smoke."""
     import argparse
 
     p = argparse.ArgumentParser(description=doc.splitlines()[0])
@@ -59,6 +59,8 @@ def parser(doc: str, smoke: str):
     p.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2, 3, 4])
     p.add_argument("--steps", type=int, help="budget of every run (default: the task family's preset)")
     p.add_argument("--workers", type=int, default=2, help="runs of different seeds in parallel")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="a hyperparameter override for every run, as in `hubsgo train --set` (repeatable)")
     p.add_argument("--smoke", action="store_true", help=smoke)
     return p
 

@@ -124,9 +124,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--tasks", nargs="+", default=list(TASKS))
     p.add_argument("--threshold", type=float, default=0.2, help="the review's drop threshold")
     args = p.parse_args(argv)
-    overrides: list[str] = []
+    overrides: list[str] = list(args.overrides)
     if args.smoke:
-        args.tasks, args.seeds, args.steps, overrides = ["keydoor_incorrect"], args.seeds[:1], 1_500, SMOKE
+        args.tasks, args.seeds, args.steps, overrides = ["keydoor_incorrect"], args.seeds[:1], 1_500, SMOKE + overrides
     out = output_dir(args.out)
     jobs = [(t, s, out, args.steps, overrides, args.threshold) for t in args.tasks for s in args.seeds]
     return finish(run_jobs(one, jobs, args.workers), out, summarise)

@@ -81,9 +81,9 @@ def main(argv: list[str] | None = None) -> int:
     p = parser(__doc__, "one seed, keydoor -> keydoor_moved, 1,000 steps, tiny networks")
     p.add_argument("--sources", nargs="+", default=list(PAIRS), choices=list(PAIRS))
     args = p.parse_args(argv)
-    overrides: list[str] = []
+    overrides: list[str] = list(args.overrides)
     if args.smoke:
-        args.sources, args.seeds, args.steps, overrides = ["keydoor"], args.seeds[:1], 1_000, SMOKE
+        args.sources, args.seeds, args.steps, overrides = ["keydoor"], args.seeds[:1], 1_000, SMOKE + overrides
     out = output_dir(args.out)
     jobs = [(s, seed, out, args.steps, overrides) for s in args.sources for seed in args.seeds]
     return finish(run_jobs(one, jobs, args.workers), out, summarise)
