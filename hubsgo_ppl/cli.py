@@ -121,7 +121,8 @@ def _run_task(run_dir: Path) -> str:
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from .experiments.run import evaluate
 
-    r = evaluate(args.run_dir, episodes=args.episodes, seed=args.seed)
+    r = evaluate(args.run_dir, episodes=args.episodes, seed=args.seed,
+                 break_cycles=False if args.no_break_cycles else None)
     line = (f"{r['agent']} on {r['task']}: greedy return {r['mean_return']:.4f} ± {r['se_return']:.4f} (s.e.), "
             f"success {r['success_rate']:.2f} over {r['episodes']} episodes")
     if "optimal_return" in r:
@@ -288,6 +289,9 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("run_dir")
     e.add_argument("--episodes", type=int, default=10)
     e.add_argument("--seed", type=int, default=None, help="evaluation seed (default: derived from the run's)")
+    e.add_argument("--no-break-cycles", action="store_true",
+                   help="evaluate the bare greedy low level; by default a step in a state where it already "
+                        "acted greedily for the same sub-goal in the episode is random, as in training")
     e.set_defaults(func=cmd_evaluate)
 
     s = sub.add_parser("subgoals", help="print the learned sub-goal sets G* of a HUBS-GO run")

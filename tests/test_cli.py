@@ -1,6 +1,7 @@
 """The `hubsgo` command line: verbs work end to end; bad input gives one clear line and exit code 2."""
 
 import csv
+import json
 import shutil
 import subprocess
 import sys
@@ -40,6 +41,9 @@ def test_train_subgoals_evaluate_round_trip(tmp_path, capsys):
     assert "rank" in table and "marginals P(w=1)" in table
     assert main(["evaluate", str(run), "--episodes", "2"]) == 0
     assert "greedy return" in capsys.readouterr().out
+    assert json.loads((run / "eval.json").read_text())["break_cycles"] is True
+    assert main(["evaluate", str(run), "--episodes", "2", "--no-break-cycles"]) == 0
+    assert json.loads((run / "eval.json").read_text())["break_cycles"] is False
 
 
 @pytest.mark.parametrize("argv, needle", [

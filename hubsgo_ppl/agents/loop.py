@@ -87,8 +87,13 @@ class LoopConfig:
     # path that did not reach the sub-goal, and in a deterministic env a greedy cycle never ends by
     # itself (this caused every late KeyDoor timeout, docs/results.md). States reached after a
     # random step are not marked, so one ε-step does not start a random walk. Discrete action spaces
-    # with a learned low level only; greedy evaluation is unaffected.
+    # with a learned low level only.
     low_break_cycles: bool = True
+    # Greedy evaluation breaks the low level's cycles by the same rule (with low_break_cycles): the
+    # agent is evaluated as it acts, minus exploration; every other evaluation step is greedy. False
+    # evaluates the bare greedy policy, which loops for the rest of an episode once it enters a cycle
+    # (``hubsgo evaluate --no-break-cycles``).
+    eval_break_cycles: bool = True
 
     def __post_init__(self):
         if self.filter_refresh not in ("option", "episode"):
@@ -127,6 +132,11 @@ class HRLLoop:
         self._ghat_given: np.ndarray | None = None   # the achieved set Ĝt was last read with
         self._break_cycles = (config.low_break_cycles and low.learns
                               and isinstance(env.action_space, gym.spaces.Discrete))
+
+    @property
+    def eval_breaks_cycles(self) -> bool:
+        """Whether greedy evaluation (``run_episode(train=False)``) breaks the low level's cycles."""
+        return bool(self._break_cycles and self.cfg.eval_break_cycles)
 
     # -- one episode ---------------------------------------------------------------------------------
     def progress(self) -> float:
@@ -178,6 +188,7 @@ class HRLLoop:
         chosen: list[str] = []
         self._read_filter(achieved)     # with filter_refresh="episode", Ĝt holds until the achieved set changes
         greedy_at: set[tuple[int, bytes]] = set()   # (sub-goal, state) where the low level acted greedily
+        breaking = self._break_cycles and (train or cfg.eval_break_cycles)
         revisits = 0
         explore, low_explore, filter_eps = 0.0, 0.0, cfg.eval_filter     # greedy evaluation
         done = False
@@ -196,7 +207,7 @@ class HRLLoop:
                 goal_explore = max(low_explore, min(cfg.low_explore_cap, 1.0 - float(self.success_rate[g])))
             while k < cfg.option_steps:
                 step_explore, key = goal_explore, None
-                if train and self._break_cycles:
+                if breaking:
                     key = (g, np.asarray(obs).tobytes())
                     if key in greedy_at:
                         step_explore, revisits = 1.0, revisits + 1

@@ -6,7 +6,8 @@ Run directory::
     metrics.csv            one row per training episode
     critic_history.csv     P(w_i = 1) over training (HUBS-GO)
     tb/                    TensorBoard events
-    checkpoint.pt          latest checkpoint, written atomically every ``checkpoint_every`` episodes
+    checkpoint.pt          latest checkpoint, written atomically at the end of the episode that crosses
+                           each multiple of ``checkpoint_steps`` env steps (and at the end of the run)
     subgoals.json          G*: the configuration ranking from G_STAR_SAMPLES (10,000) critic samples (HUBS-GO)
     learning_curve.png     return and success over environment steps (revisions marked)
     eval.json              written by ``evaluate``
@@ -52,11 +53,15 @@ from .logger import CSVOutput, Logger, TensorBoardOutput, read_csv_rows
 from .plots import plot_learning_curve
 
 __all__ = ["RunConfig", "RunError", "train", "evaluate", "load_run", "subgoal_table", "plot_run_curve",
-           "read_revisions", "CHECKPOINT", "REVISIONS_CSV"]
+           "read_revisions", "CHECKPOINT", "CHECKPOINT_STEPS", "REVISIONS_CSV"]
 
 CHECKPOINT = "checkpoint.pt"
 #: version of the checkpoint layout (``{"format", "config", "agent", "episodes", "env_steps", "wall_time"}``)
 CHECKPOINT_FORMAT = 1
+#: env steps between checkpoints. Counted in env steps, not episodes (as Stable-Baselines3's
+#: CheckpointCallback does), so that an agent whose episodes get short does not pay for more checkpoints
+#: (each holds the replay buffers) than one that still wanders; a kill loses at most this many steps.
+CHECKPOINT_STEPS = 5_000
 #: critic samples behind G*, the configuration ranking of subgoals.json
 G_STAR_SAMPLES = 10_000
 #: what ``train`` writes into a run directory besides the checkpoint (``tb`` is a folder)
@@ -80,7 +85,7 @@ class RunConfig:
     steps: int | None = None          # env-step budget; default per task family
     seed: int = 0
     low_level: str | None = None      # "learned" | "scripted"; default per task family
-    checkpoint_every: int = 25        # episodes
+    checkpoint_steps: int = CHECKPOINT_STEPS   # env steps between checkpoints
     history_every: int = 5            # episodes between critic marginal snapshots
     threads: int = 1                  # torch threads (small nets: 1 is fastest and reproducible)
     overrides: list[str] = field(default_factory=list)
@@ -101,6 +106,8 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
     info = get_task(cfg.task)
     if cfg.steps is not None and cfg.steps <= 0:
         raise RunError(f"--steps must be positive, got {cfg.steps}")
+    if int(cfg.checkpoint_steps) <= 0:
+        raise RunError(f"checkpoint_steps must be a positive number of env steps, got {cfg.checkpoint_steps}")
     try:        # the preset, the task's settings and --set merged and validated (agents/config.py)
         hyper = resolve_hyper(info.family, info.name, cfg.agent, cfg.overrides, steps=cfg.steps,
                               low_level=cfg.low_level)
@@ -113,7 +120,7 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
     resolved: dict[str, Any] = {
         "task": info.name, "task_ref": str(cfg.task), "family": info.family,
         "agent": cfg.agent, "seed": int(cfg.seed), "hyper": hyper,
-        "checkpoint_every": cfg.checkpoint_every, "history_every": cfg.history_every, "threads": cfg.threads,
+        "checkpoint_steps": int(cfg.checkpoint_steps), "history_every": cfg.history_every, "threads": cfg.threads,
         "versions": {"hubsgo_ppl": __version__, "torch": str(torch.__version__), "python": platform.python_version()},
     }
     names = info.catalogue.names
@@ -328,7 +335,8 @@ def train(cfg: RunConfig, out: str | Path, resume: bool = False, progress: bool 
                        desc=f"{resolved['agent']}/{resolved['task']}/s{resolved['seed']}")
             closing.callback(bar.close)
         recent: list[tuple[float, float]] = []
-        last_ckpt = agent.episodes // int(resolved["checkpoint_every"])
+        every = int(resolved.get("checkpoint_steps", CHECKPOINT_STEPS))
+        last_ckpt = agent.env_steps // every
         t0 = time.perf_counter()
         episodes_this_call = 0
         try:
@@ -346,8 +354,8 @@ def train(cfg: RunConfig, out: str | Path, resume: bool = False, progress: bool 
                                        **{n: round(float(m), 5) for n, m in zip(names, marg)}}, stats.env_steps)
                     if on_episode is not None:
                         on_episode(stats)
-                if agent.episodes // int(resolved["checkpoint_every"]) > last_ckpt:   # crossed a multiple
-                    last_ckpt = agent.episodes // int(resolved["checkpoint_every"])
+                if agent.env_steps // every > last_ckpt:   # this chunk crossed a multiple of `every`
+                    last_ckpt = agent.env_steps // every
                     _save(out, resolved, agent, wall0 + time.perf_counter() - t0)
                 if bar is not None and recent:
                     bar.update(min(agent.env_steps, total) - min(before, total))
@@ -396,12 +404,21 @@ def plot_run_curve(run_dir: str | Path, resolved: dict[str, Any] | None = None,
     return plot_learning_curve(steps, rets, succ, path, title=title, revisions=revisions)
 
 
-def evaluate(run_dir: str | Path, episodes: int = 10, seed: int | None = None) -> dict[str, Any]:
-    """Greedy evaluation (no exploration; HUBS-GO chooses from Ĝt). Writes eval.json."""
+def evaluate(run_dir: str | Path, episodes: int = 10, seed: int | None = None,
+             break_cycles: bool | None = None) -> dict[str, Any]:
+    """Greedy evaluation (no exploration; HUBS-GO chooses from Ĝt). Writes eval.json.
+
+    A hierarchical agent's low level breaks its cycles as in training (``loop.eval_break_cycles``, on
+    by default; ``break_cycles=False`` evaluates the bare greedy policy); eval.json records which."""
     if episodes <= 0:
         raise RunError(f"--episodes must be positive, got {episodes}")
     run_dir = Path(run_dir)
     resolved, env, agent, _ = load_run(run_dir)
+    breaking = None
+    if isinstance(agent, HRLLoop):
+        if break_cycles is not None:
+            agent.cfg.eval_break_cycles = bool(break_cycles)
+        breaking = agent.eval_breaks_cycles
     with contextlib.closing(env):
         base = int(resolved["seed"]) + EVAL_SEED_OFFSET if seed is None else int(seed)
         rets, succ, lengths, optimal = [], [], [], []
@@ -421,6 +438,8 @@ def evaluate(run_dir: str | Path, episodes: int = 10, seed: int | None = None) -
               "se_return": float(np.std(rets, ddof=1) / math.sqrt(n)) if n > 1 else 0.0,
               "success_rate": float(np.mean(succ)), "mean_length": float(np.mean(lengths)),
               "returns": [float(r) for r in rets]}
+    if breaking is not None:
+        result["break_cycles"] = breaking
     if optimal:
         opt = float(np.mean(optimal))
         result["optimal_return"] = opt

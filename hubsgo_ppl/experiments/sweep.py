@@ -5,7 +5,7 @@ A sweep file (``sweeps/*.yaml``) is validated into :class:`SweepSpec`::
     name: quick
     table: table1                 # the paper's table this grid rebuilds (the report prints its numbers)
     seeds: [0, 1, 2]
-    checkpoint_every: 10          # episodes, for every run
+    checkpoint_steps: 5000        # env steps between checkpoints, for every run
     overrides: []                 # `--set` overrides applied to every run
     tasks:                        # the table's columns, each with its env-step budget
       - {name: keydoor, steps: 60000}
@@ -39,7 +39,7 @@ from pydantic import Field, field_validator, model_validator
 from ..resources import sweeps_dir
 from ..specs import SpecError, StrictModel, load_yaml, validate_spec
 from .io import CheckpointError, load_checkpoint, write_yaml
-from .run import CHECKPOINT, RunConfig, RunError
+from .run import CHECKPOINT, CHECKPOINT_STEPS, RunConfig, RunError
 
 __all__ = ["SweepSpec", "TaskEntry", "Variant", "Job", "load_sweep", "plan", "run_sweep", "run_status",
            "KILL_ENV"]
@@ -101,7 +101,7 @@ class SweepSpec(StrictModel):
     name: str
     table: Literal["table1", "table2"] | None = None
     seeds: list[int] = Field(min_length=1)
-    checkpoint_every: int = Field(default=25, gt=0)
+    checkpoint_steps: int = Field(default=CHECKPOINT_STEPS, gt=0)
     overrides: list[str] = Field(default_factory=list)
     tasks: list[TaskEntry] = Field(min_length=1)
     variants: list[Variant] = Field(min_length=1)
@@ -177,7 +177,7 @@ def plan(spec: SweepSpec, sweep_dir: Path) -> list[Job]:
                 cfg = RunConfig(task=v.task.format(task=t.name), agent=v.agent,
                                 model=v.model.format(task=t.name) if v.model else None, graph=v.graph,
                                 steps=budget, seed=seed, low_level=v.low_level,
-                                checkpoint_every=spec.checkpoint_every,
+                                checkpoint_steps=spec.checkpoint_steps,
                                 overrides=[*spec.overrides, *t.overrides, *v.overrides])
                 run_id = f"{t.name}/{v.name}/seed{seed}"
                 jobs.append(Job(run_id, str(sweep_dir / t.name / v.name / f"seed{seed}"), budget, asdict(cfg)))

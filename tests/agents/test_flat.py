@@ -55,7 +55,7 @@ def test_every_flat_agent_trains_on_every_grid_task(tmp_path, agent, task):
 def test_resume_after_crash_continues_exactly(tmp_path, agent):
     """A chunk usually ends mid-episode; resume replays the open episode, so metrics match exactly."""
     def cfg():
-        return RunConfig(task="fourroom", agent=agent, steps=2500, seed=5, checkpoint_every=1,
+        return RunConfig(task="fourroom", agent=agent, steps=2500, seed=5, checkpoint_steps=1,
                          overrides=TINY[agent])
 
     full = tmp_path / "full"

@@ -156,8 +156,8 @@ def test_ghat_is_read_given_the_achieved_subgoals_when_they_change():
 
 
 def test_low_level_steps_at_random_where_it_already_acted_greedily_under_the_same_goal():
-    """A greedy low level stuck on a no-op (pickup facing nothing) is pushed out of it while training;
-    a state first reached by a random step is not marked."""
+    """A greedy low level stuck on a no-op (pickup facing nothing) is pushed out of it while training
+    and in greedy evaluation; a state first reached by a random step is not marked."""
     for breaks in (True, False):
         loop = _loop(extra=[f"loop.low_break_cycles={str(breaks).lower()}"])
         loop._low_explore = lambda progress: 0.0
@@ -184,10 +184,19 @@ def test_low_level_steps_at_random_where_it_already_acted_greedily_under_the_sam
             assert sum(eps == 0.0 for _, eps in calls) == len(greedy)     # each state acted on greedily once
         else:
             assert {eps for _, eps in calls} == {0.0} and "low/revisits" not in stats.scalars
-        calls.clear()
-        greedy.clear()
-        loop.run_episode(train=False)                                     # greedy evaluation: never
-        assert {eps for _, eps in calls} == {0.0}
+        for evaluation_breaks in (True, False):      # greedy evaluation: by the same rule, unless turned off
+            loop.cfg.eval_break_cycles = evaluation_breaks
+            calls.clear()
+            greedy.clear()
+            before = (loop.env_steps, loop.episodes)
+            stats = loop.run_episode(train=False)
+            assert (loop.env_steps, loop.episodes) == before and "low/revisits" not in stats.scalars
+            assert loop.eval_breaks_cycles == (breaks and evaluation_breaks)
+            if breaks and evaluation_breaks:
+                assert sum(r for r, _ in calls) > 0
+                assert all((eps == 1.0) == repeat for repeat, eps in calls)
+            else:
+                assert {eps for _, eps in calls} == {0.0}
 
 
 def test_options_end_on_achievement_and_chosen_subgoals_come_from_the_allowed_set():
@@ -229,8 +238,9 @@ def test_low_level_exploration_is_annealed_per_goal_by_success_rate():
             other = _loop()
             other.load_state_dict(loop.state_dict())
             assert np.array_equal(other.success_rate, loop.success_rate)
-    # greedy evaluation never explores
+    # greedy evaluation never explores (its cycle rule aside, tested above)
     loop = _loop()
+    loop.cfg.eval_break_cycles = False
     calls = []
     act = loop.low.act
     loop.low.act = lambda obs, goal, eps, env: calls.append(eps) or act(obs, goal, eps, env)

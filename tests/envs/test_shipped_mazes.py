@@ -16,7 +16,7 @@ def test_tiny_hubsgo_run_on_each_new_maze(task, tmp_path):
     from hubsgo_ppl.envs import get_task
 
     out = tmp_path / task
-    train(RunConfig(task=task, agent="hubsgo", steps=600, seed=0, checkpoint_every=5, overrides=TINY),
+    train(RunConfig(task=task, agent="hubsgo", steps=600, seed=0, checkpoint_steps=200, overrides=TINY),
           out, progress=False)
     table = json.loads((out / "subgoals.json").read_text())
     assert table["names"] == get_task(task).catalogue.names

@@ -42,7 +42,7 @@ def paused(tmp_path_factory):
     root = tmp_path_factory.mktemp("revise")
     spec = _spec(root / "initial.yaml", "initial", FIVE + CORNERS, EDGES)
     run = root / "run"
-    train(RunConfig(task="keydoor_incorrect", model=str(spec), steps=STEPS, seed=1, checkpoint_every=2,
+    train(RunConfig(task="keydoor_incorrect", model=str(spec), steps=STEPS, seed=1, checkpoint_steps=100,
                     overrides=TINY), run, progress=False, stop_at=PAUSE)
     return run
 
@@ -155,7 +155,7 @@ def test_a_resumed_revised_run_is_deterministic(paused, tmp_path):
     spec = _spec(tmp_path / "revised.yaml", "revised", FIVE, EDGES)
     again = tmp_path / "again"              # the same seeded run, trained to the same step anew
     train(RunConfig(task="keydoor_incorrect", model=str(paused.parent / "initial.yaml"), steps=STEPS, seed=1,
-                    checkpoint_every=2, overrides=TINY), again, progress=False, stop_at=PAUSE)
+                    checkpoint_steps=100, overrides=TINY), again, progress=False, stop_at=PAUSE)
     runs = [_copy(paused, tmp_path, "r0"), again]
     for run in runs:
         out = revise(run, spec, progress=False)

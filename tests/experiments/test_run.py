@@ -25,7 +25,7 @@ TINY = ["high.learning_starts=8", "high.batch_size=8", "low.learning_starts=64",
 
 
 def _cfg(agent="hubsgo", steps=1500, **kw):
-    return RunConfig(task="keydoor", agent=agent, steps=steps, seed=3, checkpoint_every=2,
+    return RunConfig(task="keydoor", agent=agent, steps=steps, seed=3, checkpoint_steps=300,
                      overrides=TINY + ["loop.option_steps=15"], **kw)
 
 
@@ -63,12 +63,14 @@ def test_same_seed_same_metrics_and_resume_after_crash_continues_identically(tmp
     assert n_full >= 4, "the budget must span several episodes for this test to mean anything"
 
     def crash_after_checkpoint(stats):
-        if stats.episode == 2:            # the checkpoint holds 2 episodes; episode 2 is logged, then lost
+        if (crashed / "checkpoint.pt").exists():    # the first episode after a checkpoint: logged, then lost
             raise Crash
 
     with pytest.raises(Crash):
         train(_cfg(), crashed, progress=False, on_episode=crash_after_checkpoint)
-    assert len(_rows(crashed)) == 3
+    held = load_checkpoint(crashed / "checkpoint.pt")
+    assert 0 < held["episodes"] < n_full - 1 and held["env_steps"] >= 300
+    assert len(_rows(crashed)) == held["episodes"] + 1
     train(_cfg(), crashed, resume=True, progress=False)
     assert _rows(crashed) == _rows(full)
     for name in ("config.yaml", "checkpoint.pt", "subgoals.json", "learning_curve.png", "critic_history.csv"):
@@ -133,12 +135,15 @@ import json, os, sys, time
 from pathlib import Path
 from hubsgo_ppl.experiments.run import RunConfig, train
 
-out, marker, stop_at = Path(sys.argv[1]), Path(sys.argv[2]), int(sys.argv[4])
+out, marker = Path(sys.argv[1]), Path(sys.argv[2])
+after = []
 
 def hold(stats):
-    if stats.episode == stop_at:      # logged after a checkpoint: wait here for the parent's kill -9
-        marker.write_text(str(os.getpid()))
-        time.sleep(600)
+    if (out / "checkpoint.pt").exists():
+        after.append(stats.episode)
+        if len(after) == 2:     # two episodes logged after the checkpoint: wait here for the parent's kill -9
+            marker.write_text(str(os.getpid()))
+            time.sleep(600)
 
 train(RunConfig(**json.loads(sys.argv[3])), out, progress=False, on_episode=hold)
 """
@@ -204,18 +209,20 @@ def test_kill_9_then_resume_leaves_every_file_as_an_uninterrupted_run(tmp_path, 
 
     run, marker = tmp_path / "killed", tmp_path / "held"
     proc = subprocess.Popen([sys.executable, "-c", KILL_CHILD, str(run), str(marker),
-                             json.dumps(dataclasses.asdict(cfg)), "3"], stderr=subprocess.PIPE)
+                             json.dumps(dataclasses.asdict(cfg))], stderr=subprocess.PIPE)
     deadline = time.monotonic() + 120
     while not marker.exists():
         assert proc.poll() is None, proc.stderr.read().decode()[-2000:]
-        assert time.monotonic() < deadline, "the child never reached episode 3"
+        assert time.monotonic() < deadline, "the child never got two episodes past its first checkpoint"
         time.sleep(0.05)
     proc.kill()                                          # SIGKILL: no handler, no finally, no flush
     assert proc.wait(timeout=60) == -signal.SIGKILL
     proc.stderr.close()
-    assert load_checkpoint(run / "checkpoint.pt")["episodes"] == 2
-    assert [r["episode"] for r in _rows(run)] == ["0", "1", "2", "3"]        # rows the checkpoint lacks
-    assert [r["episode"] for r in read_csv_rows(run / "critic_history.csv")] == ["0", "1", "2", "3"]
+    held = load_checkpoint(run / "checkpoint.pt")["episodes"]
+    assert 0 < held and held + 2 < n, "the kill must leave episodes to train after it"
+    logged = [str(i) for i in range(held + 2)]                               # two rows the checkpoint lacks
+    assert [r["episode"] for r in _rows(run)] == logged
+    assert [r["episode"] for r in read_csv_rows(run / "critic_history.csv")] == logged
     assert not (run / "subgoals.json").exists()
 
     capsys.readouterr()
@@ -243,7 +250,7 @@ def test_run_files_honour_the_umask(tmp_path):
 
 def test_resume_before_the_first_checkpoint_starts_afresh(tmp_path, capsys):
     cfg = _cfg(steps=600)
-    cfg.checkpoint_every = 1000
+    cfg.checkpoint_steps = 10_000
     fresh = tmp_path / "fresh"
     train(cfg, fresh, progress=False)
 

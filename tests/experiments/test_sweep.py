@@ -16,7 +16,7 @@ FAST = ["high.learning_starts=8", "high.batch_size=8", "low.learning_starts=1000
 
 
 def _write(tmp_path, **spec):
-    base = {"name": "t", "seeds": [0], "checkpoint_every": 1, "overrides": FAST,
+    base = {"name": "t", "seeds": [0], "checkpoint_steps": 1, "overrides": FAST,
             "tasks": [{"name": "fourroom", "steps": 1}], "variants": [{"name": "hdqn", "agent": "hdqn"}]}
     base.update(spec)
     path = tmp_path / "sweep.yaml"
