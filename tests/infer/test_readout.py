@@ -42,6 +42,30 @@ def test_filtered_set_is_the_mode_of_the_samples_that_agree_with_the_given():
         critic.filtered_set(given=torch.zeros(3, dtype=torch.bool))
 
 
+def test_filtered_set_given_every_possible_row_matches_a_brute_force_count():
+    critic = _critic()
+    g = torch.Generator().manual_seed(3)
+    samples = (torch.rand(200, 4, generator=g) < torch.tensor([0.7, 0.6, 0.3, 0.2])).float()
+    samples[:, 3] *= 1.0 - samples[:, 2]             # no sample holds both b's: those rows get the mode
+    critic._last_samples = samples
+    given = state_table(4).bool()                                    # all 16 achieved sets at once
+
+    def brute(row):
+        counts = {}
+        for w in samples.tolist():
+            if all(w[i] == 1.0 for i in range(4) if row[i]):
+                counts[tuple(w)] = counts.get(tuple(w), 0) + 1
+        if not counts:
+            return None
+        best = max(counts.values())
+        return list(min(c for c, k in counts.items() if k == best))      # ties: lexicographically smallest
+
+    mode = critic.filtered_set().float().tolist()
+    expected = [brute(row.tolist()) or mode for row in given]
+    assert critic.filtered_set(given=given).float().tolist() == expected
+    assert any(e != mode for e in expected) and any(brute(r.tolist()) is None for r in given)
+
+
 def test_ranking_puts_the_most_probable_configuration_first_with_its_exact_probability():
     critic = _critic(theta=(3.0, 3.0, -3.0, -3.0))
     top = critic.ranking(num_samples=3000, top_k=3)
