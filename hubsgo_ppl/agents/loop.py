@@ -30,7 +30,7 @@ from .episode import EpisodeStats, EpisodeTally, reset_episode
 from .high_level import HighLevelDQN
 from .protocols import LowLevel, SubgoalFilter
 from .schedules import LinearSchedule
-from .seeding import LOOP_STREAM, episode_seed, stream_rng
+from .seeding import EVAL_LOW_LEVEL_STREAM, LOOP_STREAM, episode_seed, stream_rng
 
 __all__ = ["LoopConfig", "EpisodeStats", "HRLLoop", "episode_seed"]
 
@@ -178,7 +178,20 @@ class HRLLoop:
         return base
 
     def run_episode(self, train: bool = True, seed: int | None = None) -> EpisodeStats:
-        """Run one episode (Algorithm 1). ``train=False`` is greedy evaluation: no exploration, no updates."""
+        """Run one episode (Algorithm 1). ``train=False`` is greedy evaluation: no exploration, no updates;
+        a learned low level's random steps (the cycle rule) then come from a stream of the episode's own
+        seed, and its training stream is left as it was."""
+        if train or not self.low.learns:
+            return self._episode(train, seed)
+        trained = self.low.rng
+        env_seed = episode_seed(self.seed, self.episodes) if seed is None else int(seed)
+        self.low.rng = stream_rng(env_seed, EVAL_LOW_LEVEL_STREAM)
+        try:
+            return self._episode(False, seed)
+        finally:
+            self.low.rng = trained
+
+    def _episode(self, train: bool, seed: int | None) -> EpisodeStats:
         env, cfg = self.env, self.cfg
         obs, info = reset_episode(env, self.seed, self.episodes, seed)
         tally = EpisodeTally(self.episodes)     # the loop counts success from the steps, not the reset

@@ -15,7 +15,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-__all__ = ["NET_INIT_STREAM", "HIGH_LEVEL_STREAM", "LOW_LEVEL_STREAM", "CRITIC_STREAM", "LOOP_STREAM",
+__all__ = ["NET_INIT_STREAM", "HIGH_LEVEL_STREAM", "LOW_LEVEL_STREAM", "CRITIC_STREAM", "EVAL_LOW_LEVEL_STREAM",
+           "LOOP_STREAM",
            "SB3_STREAM", "HIRO_STREAM", "EVAL_SEED_OFFSET", "SB3_EVAL_EPISODE", "seed_sequence",
            "stream_seed", "stream_rng", "stream_generator", "episode_seed"]
 
@@ -27,6 +28,10 @@ HIGH_LEVEL_STREAM = 2
 LOW_LEVEL_STREAM = 3
 #: HUBS-GO: the sub-goal critic (its seed, ``experiments.run``)
 CRITIC_STREAM = 4
+#: hierarchical agents in greedy evaluation: the low level's random steps (its cycle rule), drawn from
+#: ``SeedSequence([episode seed, EVAL_LOW_LEVEL_STREAM])`` so that an evaluation episode depends on the
+#: checkpoint and its seed only, and leaves the training streams as they were
+EVAL_LOW_LEVEL_STREAM = 5
 #: the HRL loop's own coin: choose from Ĝt or from G0
 LOOP_STREAM = 7
 #: flat baselines: the seed handed to Stable-Baselines3

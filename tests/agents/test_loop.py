@@ -188,9 +188,11 @@ def test_low_level_steps_at_random_where_it_already_acted_greedily_under_the_sam
             loop.cfg.eval_break_cycles = evaluation_breaks
             calls.clear()
             greedy.clear()
-            before = (loop.env_steps, loop.episodes)
+            before = (loop.env_steps, loop.episodes, loop.low.rng.bit_generator.state)
             stats = loop.run_episode(train=False)
-            assert (loop.env_steps, loop.episodes) == before and "low/revisits" not in stats.scalars
+            # the random steps came from the episode's own stream: the training streams are untouched
+            assert (loop.env_steps, loop.episodes, loop.low.rng.bit_generator.state) == before
+            assert "low/revisits" not in stats.scalars
             assert loop.eval_breaks_cycles == (breaks and evaluation_breaks)
             if breaks and evaluation_breaks:
                 assert sum(r for r, _ in calls) > 0
