@@ -15,7 +15,7 @@ import gymnasium as gym
 
 from .seeding import episode_seed
 
-__all__ = ["EpisodeStats", "EpisodeTally", "reset_episode", "sequential_mean"]
+__all__ = ["EpisodeStats", "EpisodeTally", "env_seed", "reset_episode", "sequential_mean"]
 
 
 @dataclass
@@ -41,12 +41,17 @@ class EpisodeStats:
         return d
 
 
+def env_seed(run_seed: int, episode: int, seed: int | None = None) -> int:
+    """The env seed of episode ``episode`` of the run seeded ``run_seed``: ``episode_seed(run_seed,
+    episode)``, or ``seed`` when one is given (evaluation)."""
+    return episode_seed(run_seed, episode) if seed is None else int(seed)
+
+
 def reset_episode(env: gym.Env, run_seed: int, episode: int, seed: int | None = None,
                   options: dict | None = None) -> tuple[Any, dict]:
-    """Reset ``env`` for episode ``episode`` of the run seeded ``run_seed``: with
-    ``episode_seed(run_seed, episode)``, or with ``seed`` when one is given (evaluation)."""
+    """Reset ``env`` for episode ``episode`` of the run seeded ``run_seed`` with :func:`env_seed`."""
     extra = {} if options is None else {"options": options}
-    return env.reset(seed=episode_seed(run_seed, episode) if seed is None else seed, **extra)
+    return env.reset(seed=env_seed(run_seed, episode, seed), **extra)
 
 
 def sequential_mean(values: list[float]) -> float:

@@ -26,7 +26,7 @@ import numpy as np
 import torch
 
 from ..infer.tdbatch import TDBatch
-from .episode import EpisodeStats, EpisodeTally, reset_episode
+from .episode import EpisodeStats, EpisodeTally, env_seed, reset_episode
 from .high_level import HighLevelDQN
 from .protocols import LowLevel, SubgoalFilter
 from .schedules import LinearSchedule
@@ -184,8 +184,7 @@ class HRLLoop:
         if train or not self.low.learns:
             return self._episode(train, seed)
         trained = self.low.rng
-        env_seed = episode_seed(self.seed, self.episodes) if seed is None else int(seed)
-        self.low.rng = stream_rng(env_seed, EVAL_LOW_LEVEL_STREAM)
+        self.low.rng = stream_rng(env_seed(self.seed, self.episodes, seed), EVAL_LOW_LEVEL_STREAM)
         try:
             return self._episode(False, seed)
         finally:
@@ -201,7 +200,7 @@ class HRLLoop:
         chosen: list[str] = []
         self._read_filter(achieved)     # with filter_refresh="episode", Ĝt holds until the achieved set changes
         greedy_at: set[tuple[int, bytes]] = set()   # (sub-goal, state) where the low level acted greedily
-        breaking = self._break_cycles and (train or cfg.eval_break_cycles)
+        breaking = self._break_cycles if train else self.eval_breaks_cycles
         revisits = 0
         explore, low_explore, filter_eps = 0.0, 0.0, cfg.eval_filter     # greedy evaluation
         done = False
