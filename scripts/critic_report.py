@@ -8,7 +8,12 @@ as a fraction of the BFS optimum (``hubsgo evaluate``, 5 episodes), and for HUBS
 set is exactly one route (on the arm tasks: one consistent plan, ``PLANS``), with its probability and
 the runner-up's. Mean ± s.e. over seeds.
 
-    python scripts/critic_report.py runs/sweeps/critic [--tasks keydoor threepair ...] [--no-eval]
+``--after-first`` adds a second table on the stretch from a seed's first success to 90% success (the
+episodes that close the 20-episode window): their number, success rate and mean length, the
+high-level ε at the first success, and for HUBS-GO the mean size of Ĝt there (the critic's mode and
+the safeguard's additions, ``critic/set_size`` + ``critic/kept`` of ``metrics.csv``).
+
+    python scripts/critic_report.py runs/sweeps/critic [--tasks keydoor threepair ...] [--no-eval] [--after-first]
 """
 
 from __future__ import annotations
@@ -72,11 +77,29 @@ def fmt(values) -> str:
     return f"{m:.4g} ± {se:.2g}" if abs(m) < 10 else f"{m:,.0f} ± {se:,.0f}"
 
 
+def _stretch(m: pd.DataFrame) -> dict[str, float]:
+    """The episodes from the first success to the one where the rolling success first reaches 0.9."""
+    nan = {k: math.nan for k in ("stretch_episodes", "stretch_success", "stretch_length", "stretch_eps",
+                                 "stretch_ghat")}
+    success = m["success"].astype(float)
+    reached = success.rolling(20).mean() >= 0.9
+    if not success.any() or not reached.any():
+        return nan
+    i0, i1 = int(success.to_numpy().argmax()), int(reached.to_numpy().argmax())
+    w = m.iloc[i0:i1 + 1]
+    ghat = (float((w["critic/set_size"] + w["critic/kept"]).mean())
+            if {"critic/set_size", "critic/kept"} <= set(m.columns) else math.nan)
+    return {"stretch_episodes": float(i1 - i0), "stretch_success": float(w["success"].mean()),
+            "stretch_length": float(w["length"].mean()), "stretch_eps": float(w["explore_eps"].iloc[0]),
+            "stretch_ghat": ghat}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("sweep_dir")
     ap.add_argument("--tasks", nargs="*")
     ap.add_argument("--no-eval", action="store_true")
+    ap.add_argument("--after-first", action="store_true", help="also the stretch from the first success to 90%%")
     args = ap.parse_args()
     root = Path(args.sweep_dir)
     rows = []
@@ -95,6 +118,7 @@ def main() -> None:
                        "mean_return": float(m["return"].mean()), "steps90": steps_to(m.to_dict("records")),
                        "first": first, "wall": float(m["wall_time"].iloc[-1])}
                 row["after_first"] = row["steps90"] - first
+                row.update(_stretch(m))
                 if not args.no_eval:
                     from hubsgo_ppl.experiments.run import evaluate
 
@@ -121,6 +145,15 @@ def main() -> None:
               f"{fmt(list(g['p_top'])) if 'p_top' in g and g['p_top'].notna().any() else ''} | "
               f"{fmt(list(g['p_second'])) if 'p_second' in g and g['p_second'].notna().any() else ''} | "
               f"{fmt(list(g['wall']))} |")
+    if args.after_first:
+        print()
+        print("| task | agent | episodes from the first success to 90% | their success rate | their mean length | "
+              "high-level ε at the first success | size of Ĝt there |")
+        print("|---|---|---|---|---|---|---|")
+        for (task, var), g in df.groupby(["task", "variant"], sort=False):
+            print(f"| {task} | {var} | {fmt(list(g['stretch_episodes']))} | {fmt(list(g['stretch_success']))} | "
+                  f"{fmt(list(g['stretch_length']))} | {fmt(list(g['stretch_eps']))} | "
+                  f"{fmt(list(g['stretch_ghat'])) if g['stretch_ghat'].notna().any() else ''} |")
     if "top" in df:
         print()
         for _, r in df[df["top"].notna()].iterrows():

@@ -1,0 +1,46 @@
+"""scripts/critic_report.py: the stretch from the first success to 90% success, on a known log."""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "scripts"))
+import critic_report  # noqa: E402  (a script module, not a package)
+
+
+def _log(success: list[int], hubsgo: bool = True) -> pd.DataFrame:
+    n = len(success)
+    m = pd.DataFrame({"success": success, "length": [100 + i for i in range(n)],
+                      "explore_eps": [1.0 - i / n for i in range(n)]})
+    if hubsgo:
+        m["critic/set_size"] = [3.0] * n
+        m["critic/kept"] = [float(i % 2) for i in range(n)]
+    return m
+
+
+def test_stretch_spans_the_first_success_to_the_first_full_window():
+    # failures at episodes 0-4 and 10: the 20 episodes 4..23 first hold 18 successes (0.9), so the
+    # stretch runs from episode 5 (the first success) to episode 23, 19 episodes with one failure
+    success = [0] * 5 + [1] * 5 + [0] + [1] * 20
+    out = critic_report._stretch(_log(success))
+    assert out["stretch_episodes"] == 23 - 5
+    assert out["stretch_success"] == pytest.approx(18 / 19)
+    assert out["stretch_length"] == pytest.approx(sum(100 + i for i in range(5, 24)) / 19)
+    assert out["stretch_eps"] == pytest.approx(1.0 - 5 / len(success))
+    assert out["stretch_ghat"] == pytest.approx(3.0 + sum(i % 2 for i in range(5, 24)) / 19)
+
+
+def test_stretch_is_undefined_without_a_success_or_without_90_percent():
+    assert all(math.isnan(v) for v in critic_report._stretch(_log([0] * 30)).values())
+    assert all(math.isnan(v) for v in critic_report._stretch(_log([0, 1] * 20)).values())
+
+
+def test_stretch_without_a_critic_has_no_ghat_size():
+    # episodes 1..20 first hold 18 successes: the stretch is episodes 3..20
+    out = critic_report._stretch(_log([0] * 3 + [1] * 25, hubsgo=False))
+    assert out["stretch_episodes"] == 20 - 3 and math.isnan(out["stretch_ghat"])
