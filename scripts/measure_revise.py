@@ -13,7 +13,8 @@ Per arm it reports, as mean ± standard error over the seeds: the success rate o
 episodes, the mean return over the last third of the budget, and the env steps until the rolling
 success rate (20 episodes) first reaches 90% (runs that never reach it are counted, not averaged), in
 the arm's own run and in total: a restart begins where the other two arms paused, so its total adds
-the B/3 steps spent before the pause.
+the B/3 steps spent before the pause. For the revised and unrevised arms also the failed episodes that
+began after the pause and the mean length of the 20th to 60th of those episodes.
 Everything goes under ``--out``: one folder per task, seed and arm, ``results.csv`` (one row per run)
 and ``summary.md``. Re-running skips finished runs (the runs are ordinary run directories).
 
@@ -37,15 +38,24 @@ TASKS = ("keydoor_incorrect", "fourroom_incorrect")
 ARMS = ("revised", "unrevised", "restart")
 
 
-def run_stats(run: Path, budget: int) -> dict[str, float]:
+def run_stats(run: Path, budget: int, pause: int | None = None) -> dict[str, float]:
+    """Per-run measures; with ``pause`` (the env step of the review) also the failed episodes after it
+    and the mean length of the 20th to 60th episode after it."""
     from hubsgo_ppl.experiments.logger import read_csv_rows
 
     rows = read_csv_rows(run / "metrics.csv")
     last = rows[-WINDOW:]
     tail = [r for r in rows if float(r["env_steps"]) > budget * 2 / 3] or rows[-1:]
-    return {"episodes": len(rows), "final_success": sum(float(r["success"]) for r in last) / max(len(last), 1),
-            "late_return": sum(float(r["return"]) for r in tail) / max(len(tail), 1),
-            "steps_to_90": steps_to(rows)}
+    out = {"episodes": len(rows), "final_success": sum(float(r["success"]) for r in last) / max(len(last), 1),
+           "late_return": sum(float(r["return"]) for r in tail) / max(len(tail), 1),
+           "steps_to_90": steps_to(rows)}
+    out["failures_after_pause"] = out["settled_length"] = float("nan")
+    if pause is not None:
+        after = [r for r in rows if float(r["env_steps"]) - float(r["length"]) >= pause]
+        settled = after[20:60]
+        out["failures_after_pause"] = float(sum(1 for r in after if not float(r["success"])))
+        out["settled_length"] = (sum(float(r["length"]) for r in settled) / len(settled)) if settled else float("nan")
+    return out
 
 
 def corrected_spec(review: dict[str, Any], spec: dict[str, Any], path: Path) -> Path:
@@ -106,7 +116,7 @@ def one(task: str, seed: int, out: Path, steps: int | None, overrides: list[str]
     dropped = [n for n in yaml.safe_load((runs["revised"] / "revisions" / "001" / "spec_before.yaml").read_text())["subgoals"]
                if n not in yaml.safe_load(spec_path.read_text())["subgoals"]]
     rows = [{"task": task, "seed": seed, "arm": arm, "budget": budget, "dropped": " ".join(dropped),
-             **run_stats(runs[arm], budget)} for arm in ARMS]
+             **run_stats(runs[arm], budget, None if arm == "restart" else budget // 3)} for arm in ARMS]
     for row in rows:    # total env steps: a restart begins where the other two arms paused
         row["total_steps_to_90"] = row["steps_to_90"] + (budget // 3 if row["arm"] == "restart" else 0)
     return rows
@@ -115,8 +125,10 @@ def one(task: str, seed: int, out: Path, steps: int | None, overrides: list[str]
 def summarise(rows: list[dict], path: Path) -> str:
     return summary_table(rows, lambda r: r["task"], ARMS,
                          ["task", "arm", "seeds", "success, last 20 episodes", "return, last third",
-                          "steps to 90% success (own run)", "total env steps to 90% success"],
-                         ["final_success", "late_return", "steps_to_90", "total_steps_to_90"], path)
+                          "steps to 90% success (own run)", "total env steps to 90% success",
+                          "failed episodes after B/3", "length of the 20th-60th episode after B/3"],
+                         ["final_success", "late_return", "steps_to_90", "total_steps_to_90",
+                          "failures_after_pause", "settled_length"], path)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,0 +1,48 @@
+"""scripts/measure_revise.py: the per-run measures, on a known metrics.csv."""
+
+from __future__ import annotations
+
+import csv
+import math
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "scripts"))
+import measure_revise  # noqa: E402  (a script module, not a package)
+
+
+def _write(run: Path, lengths: list[int], success: list[int]) -> None:
+    run.mkdir()
+    steps = 0
+    with open(run / "metrics.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["episode", "env_steps", "length", "success", "return"])
+        for i, (n, ok) in enumerate(zip(lengths, success)):
+            steps += n
+            w.writerow([i, steps, n, ok, 0.9 if ok else 0.0])
+
+
+def test_failures_and_settled_length_count_episodes_that_began_after_the_pause(tmp_path):
+    # 10 episodes of 100 steps (ending at 100..1000), then 70 of 10 steps; the pause at 1,000 steps:
+    # the episodes after it are the 70 short ones, two of which fail
+    lengths = [100] * 10 + [10] * 70
+    success = [0] * 10 + [1] * 70
+    success[10 + 3] = success[10 + 40] = 0
+    _write(tmp_path / "run", lengths, success)
+    out = measure_revise.run_stats(tmp_path / "run", budget=1_700, pause=1_000)
+    assert out["failures_after_pause"] == 2
+    assert out["settled_length"] == 10
+    assert out["episodes"] == 80
+    assert out["final_success"] == 1.0
+    # the last third of the budget: the episodes ending after 1,133 steps (one failure among them)
+    tail = [s for s, e in zip(success, [sum(lengths[:i + 1]) for i in range(80)]) if e > 1_700 * 2 / 3]
+    assert out["late_return"] == pytest.approx(0.9 * sum(tail) / len(tail))
+
+
+def test_without_a_pause_the_after_pause_measures_are_undefined(tmp_path):
+    _write(tmp_path / "run", [50] * 30, [1] * 30)
+    out = measure_revise.run_stats(tmp_path / "run", budget=1_500)
+    assert math.isnan(out["failures_after_pause"]) and math.isnan(out["settled_length"])
+    assert out["steps_to_90"] == 20 * 50
