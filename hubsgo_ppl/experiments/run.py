@@ -315,6 +315,7 @@ def train(cfg: RunConfig, out: str | Path, resume: bool = False, progress: bool 
     out = Path(out)
     if stop_at is not None and int(stop_at) <= 0:
         raise RunError(f"--stop-at must be a positive env step, got {stop_at}")
+    torch.set_num_threads(int(cfg.threads))     # before anything is built, as in a sweep worker
     resolved, env, agent, wall0, purge = _start(cfg, out, resume)
     with contextlib.ExitStack() as closing:
         closing.callback(env.close)

@@ -275,6 +275,28 @@ def test_resume_before_the_first_checkpoint_starts_afresh(tmp_path, capsys):
     assert_same_run(run, fresh)
 
 
+def test_the_agent_is_built_with_the_runs_torch_threads(tmp_path, monkeypatch):
+    # a sweep worker sets one thread before anything is built; `hubsgo train` must too, or float
+    # reductions made while building (and after) can differ from the sweep's run of the same config
+    import hubsgo_ppl.experiments.run as run_mod
+
+    seen = []
+    real_build = run_mod._build
+
+    def build(resolved):
+        seen.append(torch.get_num_threads())
+        return real_build(resolved)
+
+    monkeypatch.setattr(run_mod, "_build", build)
+    before = torch.get_num_threads()
+    try:
+        torch.set_num_threads(2)
+        train(_cfg(steps=300), tmp_path / "run", progress=False)
+    finally:
+        torch.set_num_threads(before)
+    assert seen == [1]
+
+
 @pytest.mark.parametrize("error", [RuntimeError, KeyboardInterrupt, FloatingPointError])
 def test_an_exception_closes_the_writer_and_the_env(tmp_path, monkeypatch, error):
     import hubsgo_ppl.experiments.run as run_mod
