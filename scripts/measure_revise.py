@@ -58,11 +58,15 @@ def run_stats(run: Path, budget: int, pause: int | None = None) -> dict[str, flo
     return out
 
 
-def corrected_spec(review: dict[str, Any], spec: dict[str, Any], path: Path) -> Path:
-    """The human's revision of ``spec`` after ``review`` (module docstring), written to ``path``."""
+def corrected_spec(review: dict[str, Any], spec: dict[str, Any], path: Path, keep_linked: bool = False) -> Path:
+    """The human's revision of ``spec`` after ``review`` (module docstring), written to ``path``.
+    ``keep_linked``: a human who drops only suggested sub-goals that no edge of the spec joins to
+    another sub-goal (the route not taken stays; sub-goals the human related to nothing go)."""
 
+    linked = {n for u, v, _ in spec["edges"] for n in (u, v)}
     drop = {d["name"] for d in review["suggested_drops"]
-            if d["success_frequency"] is None or d["success_frequency"] < 0.5}
+            if (d["success_frequency"] is None or d["success_frequency"] < 0.5)
+            and not (keep_linked and d["name"] in linked)}
     keep = [n for n in spec["subgoals"] if n not in drop]
     if not keep:                                    # a spec lists at least one sub-goal
         keep, drop = list(spec["subgoals"]), set()
@@ -76,7 +80,8 @@ def corrected_spec(review: dict[str, Any], spec: dict[str, Any], path: Path) -> 
     return path
 
 
-def one(task: str, seed: int, out: Path, steps: int | None, overrides: list[str], threshold: float) -> list[dict]:
+def one(task: str, seed: int, out: Path, steps: int | None, overrides: list[str], threshold: float,
+        keep_linked: bool = False) -> list[dict]:
     """The three arms of one (task, seed); returns one result row per arm."""
     import torch
     import yaml
@@ -106,7 +111,7 @@ def one(task: str, seed: int, out: Path, steps: int | None, overrides: list[str]
         shutil.copytree(runs["revised"], runs["unrevised"])
         r = review(runs["revised"], threshold=threshold, gif=False, num_samples=2_000)
         spec = load_checkpoint(runs["revised"] / "checkpoint.pt")["config"]["model_spec"]
-        corrected_spec(r, spec, spec_path)
+        corrected_spec(r, spec, spec_path, keep_linked)
         revise(runs["revised"], spec_path, progress=False)
         train(RunConfig(task=task), runs["unrevised"], resume=True, progress=False)
     if not finished(runs["restart"]):
@@ -135,12 +140,14 @@ def main(argv: list[str] | None = None) -> int:
     p = parser(__doc__, "one seed, keydoor_incorrect, 1,500 steps, tiny networks")
     p.add_argument("--tasks", nargs="+", default=list(TASKS))
     p.add_argument("--threshold", type=float, default=0.2, help="the review's drop threshold")
+    p.add_argument("--keep-linked", action="store_true",
+                   help="drop only suggested sub-goals that no edge of the spec joins to another one")
     args = p.parse_args(argv)
     overrides: list[str] = list(args.overrides)
     if args.smoke:
         args.tasks, args.seeds, args.steps, overrides = ["keydoor_incorrect"], args.seeds[:1], 1_500, SMOKE + overrides
     out = output_dir(args.out)
-    jobs = [(t, s, out, args.steps, overrides, args.threshold) for t in args.tasks for s in args.seeds]
+    jobs = [(t, s, out, args.steps, overrides, args.threshold, args.keep_linked) for t in args.tasks for s in args.seeds]
     return finish(run_jobs(one, jobs, args.workers), out, summarise)
 
 
