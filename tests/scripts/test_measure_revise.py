@@ -46,3 +46,24 @@ def test_without_a_pause_the_after_pause_measures_are_undefined(tmp_path):
     out = measure_revise.run_stats(tmp_path / "run", budget=1_500)
     assert math.isnan(out["failures_after_pause"]) and math.isnan(out["settled_length"])
     assert out["steps_to_90"] == 20 * 50
+
+
+def test_the_corrected_spec_drops_suggested_sub_goals_and_with_keep_linked_only_unrelated_ones(tmp_path):
+    import yaml
+
+    spec = {"name": "toy", "task": "keydoor_incorrect", "subgoals": ["a_key", "a_door", "b_key", "b_door", "goal", "corner"],
+            "edges": [["a_key", "a_door", "positive"], ["b_key", "b_door", "positive"], ["a_door", "goal", "positive"],
+                      ["b_door", "goal", "positive"], ["a_key", "b_key", "negative"]]}
+    review = {"suggested_drops": [{"name": "b_key", "success_frequency": 0.0},
+                                  {"name": "b_door", "success_frequency": 0.0},
+                                  {"name": "corner", "success_frequency": 0.25},
+                                  {"name": "goal", "success_frequency": 1.0}],      # achieved: kept
+              "flagged_edges": [{"u": "a_key", "v": "b_key", "learned": "positive"}]}
+    every = yaml.safe_load(measure_revise.corrected_spec(review, spec, tmp_path / "all.yaml").read_text())
+    assert every["subgoals"] == ["a_key", "a_door", "goal"]
+    assert every["edges"] == [["a_key", "a_door", "positive"], ["a_door", "goal", "positive"]]
+    linked = yaml.safe_load(measure_revise.corrected_spec(review, spec, tmp_path / "linked.yaml",
+                                                          keep_linked=True).read_text())
+    assert linked["subgoals"] == ["a_key", "a_door", "b_key", "b_door", "goal"]
+    # the flagged edge takes its learned sign; the others keep the human's
+    assert ["a_key", "b_key", "positive"] in linked["edges"] and len(linked["edges"]) == 5
