@@ -66,7 +66,8 @@ def build_hierarchical(agent: str, env: gym.Env, cfg: dict[str, Any], seed: int,
     if agent == "hubsgo":
         if critic is None:
             raise ValueError("the hubsgo agent needs a critic (built from a model spec)")
-        filt = CriticFilter(critic, loop_cfg.outcome_window, loop_cfg.filter_keep, loop_cfg.filter_before_update)
+        filt = CriticFilter(critic, loop_cfg.outcome_window, loop_cfg.filter_keep, loop_cfg.filter_before_update,
+                            loop_cfg.filter_fallback)
     elif agent == "hdqn":
         filt = NoFilter()
     else:

@@ -32,7 +32,7 @@ import torch
 
 from .high_level import HighLevelBatch
 
-__all__ = ["SubgoalFilter", "CriticFilter", "NoFilter", "BEFORE_UPDATE"]
+__all__ = ["SubgoalFilter", "CriticFilter", "NoFilter", "BEFORE_UPDATE", "FALLBACK"]
 
 #: what Ĝt is before the critic's first update (with an outcome likelihood: before the first success):
 #: "g0", no filter; "completion", the configuration q favours most among those holding the sub-goals
@@ -40,6 +40,11 @@ __all__ = ["SubgoalFilter", "CriticFilter", "NoFilter", "BEFORE_UPDATE"]
 #: first episode: holding a key, Ĝt is its door and the goal; holding nothing, the completion is
 #: empty and the high level reads G0.
 BEFORE_UPDATE = ("g0", "completion")
+
+#: Ĝt given the achieved sub-goals where none of the critic's samples holds them all: "mode", the
+#: unconditional mode (it can name a route the agent can no longer take: holding the key of a route
+#: the critic has dropped, Ĝt is the other route); "completion", q's completion of the achieved set.
+FALLBACK = ("mode", "completion")
 
 
 class SubgoalFilter(Protocol):
@@ -91,9 +96,12 @@ class CriticFilter:
     name = "critic"
 
     def __init__(self, critic: Any, outcome_window: int = 20, keep_fraction: float = 1.0,
-                 before_update: str = "g0"):
+                 before_update: str = "g0", fallback: str = "mode"):
         if before_update not in BEFORE_UPDATE:
             raise ValueError(f"loop.filter_before_update must be one of {', '.join(BEFORE_UPDATE)}, got {before_update!r}")
+        if fallback not in FALLBACK:
+            raise ValueError(f"loop.filter_fallback must be one of {', '.join(FALLBACK)}, got {fallback!r}")
+        self.fallback = fallback
         if int(outcome_window) < 1:
             raise ValueError(f"loop.outcome_window must be a positive integer, got {outcome_window!r}")
         if not 0.0 <= float(keep_fraction) <= 1.0:
@@ -121,7 +129,7 @@ class CriticFilter:
         if achieved is None:
             return self._mask | self._keep
         given = torch.as_tensor(np.asarray(achieved, dtype=bool))
-        return self.critic.filtered_set(given=given).cpu().numpy().astype(bool) | self._keep
+        return self.critic.filtered_set(given=given, fallback=self.fallback).cpu().numpy().astype(bool) | self._keep
 
     def end_episode(self, visited: np.ndarray, success: bool) -> None:
         if not success:

@@ -59,6 +59,9 @@ class LoopConfig:
     # Ĝt before the critic's first update: "g0" (no filter) or "completion" (q's completion of the
     # achieved sub-goals, q being the prior then; agents/filters.py, BEFORE_UPDATE)
     filter_before_update: str = "g0"
+    # Ĝt given the achieved sub-goals where no critic sample holds them all: "mode" (the unconditional
+    # mode) or "completion" (q's completion of them; agents/filters.py, FALLBACK)
+    filter_fallback: str = "mode"
     eval_filter: float = 1.0                    # greedy evaluation chooses from Ĝt with this probability
     # h-DQN's per-goal annealing (Kulkarni et al. 2016): the low level's ε for goal g is at least
     # min(low_explore_cap, 1 - its recent success rate on g), so goals it cannot reach yet keep being
@@ -100,6 +103,8 @@ class LoopConfig:
             raise ValueError(f"loop.filter_refresh must be 'option' or 'episode', got {self.filter_refresh!r}")
         if self.schedule_from not in ("start", "first_reward"):
             raise ValueError(f"loop.schedule_from must be 'start' or 'first_reward', got {self.schedule_from!r}")
+        if self.filter_fallback not in ("mode", "completion"):
+            raise ValueError(f"loop.filter_fallback must be 'mode' or 'completion', got {self.filter_fallback!r}")
         if self.critic_pool_weight not in ("mean", "sum"):
             raise ValueError(f"loop.critic_pool_weight must be 'mean' or 'sum', got {self.critic_pool_weight!r}")
         if not 0.0 <= self.filter_end <= 1.0 or not 0.0 <= self.filter_start <= 1.0:

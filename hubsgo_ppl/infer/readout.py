@@ -52,15 +52,18 @@ class CriticReadout:
             raise RuntimeError("no update has run yet; call update() first")
         return self._last_samples.clone()
 
-    def filtered_set(self, given: torch.Tensor | None = None) -> torch.Tensor:
+    def filtered_set(self, given: torch.Tensor | None = None, fallback: str = "mode") -> torch.Tensor:
         """Sec. 3.4: the most frequent configuration among the last update's samples, BoolTensor (N,).
 
         ``given`` (bool, (N,) or (B, N)) conditions on sub-goals already achieved: the most frequent
         configuration among the samples with ``w_i = 1`` for every given ``i``, i.e. the mode of the
         samples from q(w | w_given = 1). Where no sample agrees with a row, that row gets the
-        unconditional mode. The result has ``given``'s shape. Before the first update the samples are
+        unconditional mode (``fallback="mode"``) or q's completion of the row (``"completion"``,
+        :meth:`completion`). The result has ``given``'s shape. Before the first update the samples are
         the current chain states. Ties go to the lexicographically smallest configuration.
         """
+        if fallback not in ("mode", "completion"):
+            raise ValueError(f"fallback must be 'mode' or 'completion', got {fallback!r}")
         _, configs, counts = self._sample_counts()
         mode = int(counts.argmax())
         if given is None:
@@ -72,7 +75,12 @@ class CriticReadout:
         agree = (rows.to(configs.dtype) @ (1.0 - configs).T) == 0
         best = torch.where(agree, counts[None], torch.zeros_like(counts)[None]).argmax(-1)
         best = torch.where(agree.any(-1), best, torch.full_like(best, mode))
-        return configs[best].bool().reshape(given.shape)
+        out = configs[best].bool()
+        if fallback == "completion":
+            missing = ~agree.any(-1)
+            if missing.any():
+                out[missing] = self.completion(rows[missing]).bool()
+        return out.reshape(given.shape)
 
     def _given_rows(self, given) -> torch.Tensor:
         """``given`` as a bool tensor of shape (N,) or (B, N); any other shape is refused."""
