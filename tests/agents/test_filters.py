@@ -178,3 +178,38 @@ def test_before_its_first_update_the_filter_can_read_the_priors_completion():
                                             | f._keep).tolist()
     with pytest.raises(ValueError, match="filter_before_update must be one of g0, completion"):
         CriticFilter(prior_critic(), before_update="prior")
+
+
+def test_holding_a_key_no_sample_holds_the_filter_can_fall_back_to_the_completion():
+    # after an update that has learned the yellow route, no sample holds the blue key; an agent that
+    # picked it up anyway gets the yellow route from the unconditional mode (a route it can no longer
+    # take), and with filter_fallback "completion" q's completion of what it holds (here the blue key
+    # alone: the loop then reads G0, where the blue door and the goal are)
+    graph = SubgoalGraph(["yk", "yd", "bk", "bd", "goal"],
+                         [("yk", "yd", 1), ("bk", "bd", 1), ("yk", "bk", -1), ("yd", "bd", -1),
+                          ("yd", "goal", 1), ("bd", "goal", 1)])
+    from hubsgo_ppl.infer.critic import InferenceConfig
+
+    def outcome_critic():
+        return SubgoalCritic(graph, prior="ising", prior_params={"strength": 3.0, "field": -2.0},
+                             likelihood="outcome", config=InferenceConfig(init="prior"), seed=0)
+
+    filters = {fb: CriticFilter(outcome_critic(), keep_fraction=0.0, fallback=fb) for fb in ("mode", "completion")}
+    yellow = np.array([True, True, False, False, True])
+    holds_bk = np.array([False, False, True, False, False])
+    q = torch.rand(16, 5, generator=torch.Generator().manual_seed(0))
+    batch = TDBatch(q[:, 0], q, torch.zeros(16), torch.full((16,), 0.9), available=torch.ones(16, 5, dtype=torch.bool))
+    for f in filters.values():
+        f.end_episode(yellow, success=True)
+        for _ in range(60):
+            f.update(batch)
+        assert not f.critic.last_samples()[:, 2].bool().any(), "a sample holds the blue key; the test needs none"
+    assert filters["mode"].allowed(holds_bk).tolist() == filters["mode"].allowed().tolist() == yellow.tolist()
+    expected = filters["completion"].critic.completion(torch.as_tensor(holds_bk)).numpy()
+    got = filters["completion"].allowed(holds_bk)
+    assert got.tolist() == expected.tolist()
+    assert got[2] and not got[0] and not got[1]       # it holds the blue key and names no yellow sub-goal
+    with pytest.raises(ValueError, match="loop.filter_fallback must be one of mode, completion"):
+        CriticFilter(outcome_critic(), fallback="nearest")
+    with pytest.raises(ValueError, match="loop.filter_fallback must be 'mode' or 'completion'"):
+        LoopConfig(filter_fallback="nearest")

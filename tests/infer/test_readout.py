@@ -66,6 +66,23 @@ def test_filtered_set_given_every_possible_row_matches_a_brute_force_count():
     assert any(e != mode for e in expected) and any(brute(r.tolist()) is None for r in given)
 
 
+def test_filtered_set_falls_back_to_the_completion_where_no_sample_agrees():
+    critic = _critic()
+    samples = torch.tensor([[1, 1, 0, 0]] * 5 + [[0, 0, 1, 1]] * 3 + [[1, 0, 1, 0]] * 2, dtype=torch.float32)
+    critic._last_samples = samples
+    given = torch.tensor([[False, False, True, False],      # samples agree: their mode, as with "mode"
+                          [False, True, False, True],       # nothing agrees: q's completion of the row
+                          [False, False, False, False]])
+    out = critic.filtered_set(given=given, fallback="completion")
+    assert out[0].tolist() == [False, False, True, True] and out[2].tolist() == [True, True, False, False]
+    assert out[1].tolist() == critic.completion(given[1]).tolist()
+    assert out[1].tolist() != critic.filtered_set(given=given[1]).tolist()      # not the unconditional mode
+    assert out[1, 1] and out[1, 3]                                              # it holds what was achieved
+    assert critic.filtered_set(given=given[1], fallback="completion").tolist() == out[1].tolist()
+    with pytest.raises(ValueError, match="fallback must be 'mode' or 'completion'"):
+        critic.filtered_set(given=given, fallback="nearest")
+
+
 def test_ranking_puts_the_most_probable_configuration_first_with_its_exact_probability():
     critic = _critic(theta=(3.0, 3.0, -3.0, -3.0))
     top = critic.ranking(num_samples=3000, top_k=3)
