@@ -30,6 +30,7 @@ from typing import Any, Protocol
 import numpy as np
 import torch
 
+from ..infer.readout import FALLBACK
 from .high_level import HighLevelBatch
 
 __all__ = ["SubgoalFilter", "CriticFilter", "NoFilter", "BEFORE_UPDATE", "FALLBACK"]
@@ -41,10 +42,10 @@ __all__ = ["SubgoalFilter", "CriticFilter", "NoFilter", "BEFORE_UPDATE", "FALLBA
 #: empty and the high level reads G0.
 BEFORE_UPDATE = ("g0", "completion")
 
-#: Ĝt given the achieved sub-goals where none of the critic's samples holds them all: "mode", the
-#: unconditional mode (it can name a route the agent can no longer take: holding the key of a route
-#: the critic has dropped, Ĝt is the other route); "completion", q's completion of the achieved set.
-FALLBACK = ("mode", "completion")
+#: Ĝt given the achieved sub-goals where none of the critic's samples holds them all
+#: (``infer.readout.FALLBACK``): "mode", the unconditional mode (it can name a route the agent can no
+#: longer take: holding the key of a route the critic has dropped, Ĝt is the other route);
+#: "completion", q's completion of the achieved set.
 
 
 class SubgoalFilter(Protocol):

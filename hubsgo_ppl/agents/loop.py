@@ -25,6 +25,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 
+from ..infer.readout import FALLBACK
 from ..infer.tdbatch import TDBatch
 from .episode import EpisodeStats, EpisodeTally, env_seed, reset_episode
 from .high_level import HighLevelDQN
@@ -103,8 +104,8 @@ class LoopConfig:
             raise ValueError(f"loop.filter_refresh must be 'option' or 'episode', got {self.filter_refresh!r}")
         if self.schedule_from not in ("start", "first_reward"):
             raise ValueError(f"loop.schedule_from must be 'start' or 'first_reward', got {self.schedule_from!r}")
-        if self.filter_fallback not in ("mode", "completion"):
-            raise ValueError(f"loop.filter_fallback must be 'mode' or 'completion', got {self.filter_fallback!r}")
+        if self.filter_fallback not in FALLBACK:
+            raise ValueError(f"loop.filter_fallback must be one of {', '.join(FALLBACK)}, got {self.filter_fallback!r}")
         if self.critic_pool_weight not in ("mean", "sum"):
             raise ValueError(f"loop.critic_pool_weight must be 'mean' or 'sum', got {self.critic_pool_weight!r}")
         if not 0.0 <= self.filter_end <= 1.0 or not 0.0 <= self.filter_start <= 1.0:

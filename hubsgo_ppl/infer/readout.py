@@ -16,8 +16,11 @@ import torch
 from ..distributions.mh_kernels import coupling_matrix, run_chains
 from ..distributions.mrf import EXACT_LIMIT, PairwiseMRF
 
-__all__ = ["CriticReadout", "unique_rows", "RANKING_DRAWS", "MARGINAL_CHAINS", "INDEPENDENT_BURN_IN_FACTOR",
+__all__ = ["FALLBACK", "CriticReadout", "unique_rows", "RANKING_DRAWS", "MARGINAL_CHAINS", "INDEPENDENT_BURN_IN_FACTOR",
            "NEAR_TIE_STANDARD_ERRORS"]
+
+#: Ĝt given achieved sub-goals where no sample holds them all: the unconditional mode, or q's completion
+FALLBACK = ("mode", "completion")
 
 RANKING_DRAWS = 10_000  # independent draws behind G* (standard error of a probability <= 0.005)
 MARGINAL_CHAINS = 4096  # fresh chains behind the marginals above exact_max_n before any update
@@ -62,8 +65,8 @@ class CriticReadout:
         :meth:`completion`). The result has ``given``'s shape. Before the first update the samples are
         the current chain states. Ties go to the lexicographically smallest configuration.
         """
-        if fallback not in ("mode", "completion"):
-            raise ValueError(f"fallback must be 'mode' or 'completion', got {fallback!r}")
+        if fallback not in FALLBACK:
+            raise ValueError(f"fallback must be one of {', '.join(FALLBACK)}, got {fallback!r}")
         _, configs, counts = self._sample_counts()
         mode = int(counts.argmax())
         if given is None:

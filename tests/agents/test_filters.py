@@ -211,5 +211,5 @@ def test_holding_a_key_no_sample_holds_the_filter_can_fall_back_to_the_completio
     assert got[2] and not got[0] and not got[1]       # it holds the blue key and names no yellow sub-goal
     with pytest.raises(ValueError, match="loop.filter_fallback must be one of mode, completion"):
         CriticFilter(outcome_critic(), fallback="nearest")
-    with pytest.raises(ValueError, match="loop.filter_fallback must be 'mode' or 'completion'"):
+    with pytest.raises(ValueError, match="loop.filter_fallback must be one of mode, completion"):
         LoopConfig(filter_fallback="nearest")

@@ -79,7 +79,7 @@ def test_filtered_set_falls_back_to_the_completion_where_no_sample_agrees():
     assert out[1].tolist() != critic.filtered_set(given=given[1]).tolist()      # not the unconditional mode
     assert out[1, 1] and out[1, 3]                                              # it holds what was achieved
     assert critic.filtered_set(given=given[1], fallback="completion").tolist() == out[1].tolist()
-    with pytest.raises(ValueError, match="fallback must be 'mode' or 'completion'"):
+    with pytest.raises(ValueError, match="fallback must be one of mode, completion"):
         critic.filtered_set(given=given, fallback="nearest")
 
 
