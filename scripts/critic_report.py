@@ -24,7 +24,7 @@ import math
 from pathlib import Path
 
 import pandas as pd
-from measure_common import mean_se, steps_to  # a sibling script module
+from measure_common import episode_to, mean_se, steps_to  # a sibling script module
 
 # The routes of the shipped key/door mazes and FourRoom: sub-goal sets G* may name, nothing else.
 _PAIR = [["yellow_key", "yellow_door"], ["blue_key", "blue_door"]]
@@ -82,10 +82,10 @@ def _stretch(m: pd.DataFrame) -> dict[str, float]:
     nan = {k: math.nan for k in ("stretch_episodes", "stretch_success", "stretch_length", "stretch_eps",
                                  "stretch_ghat")}
     success = m["success"].astype(float)
-    reached = success.rolling(20).mean() >= 0.9
-    if not success.any() or not reached.any():
+    i1 = episode_to(m.to_dict("records"))
+    if not success.any() or i1 is None:
         return nan
-    i0, i1 = int(success.to_numpy().argmax()), int(reached.to_numpy().argmax())
+    i0 = int(success.to_numpy().argmax())
     w = m.iloc[i0:i1 + 1]
     ghat = (float((w["critic/set_size"] + w["critic/kept"]).mean())
             if {"critic/set_size", "critic/kept"} <= set(m.columns) else math.nan)

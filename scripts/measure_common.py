@@ -10,13 +10,19 @@ SMOKE = ["high.learning_starts=8", "high.batch_size=8", "low.learning_starts=64"
          "low.hidden=[32]", "high.hidden=[32]", "env.max_steps=150", "loop.option_steps=15"]
 
 
-def steps_to(rows: list[dict[str, str]], level: float = 0.9, window: int = WINDOW) -> float:
-    """Env steps at the first episode whose rolling success rate (``window`` episodes) reaches ``level``."""
+def episode_to(rows: list[dict[str, str]], level: float = 0.9, window: int = WINDOW) -> int | None:
+    """Index of the first episode whose rolling success rate (``window`` episodes) reaches ``level``."""
     succ = [float(r["success"]) for r in rows]
     for i in range(window - 1, len(succ)):
         if sum(succ[i - window + 1: i + 1]) / window >= level:
-            return float(rows[i]["env_steps"])
-    return math.nan
+            return i
+    return None
+
+
+def steps_to(rows: list[dict[str, str]], level: float = 0.9, window: int = WINDOW) -> float:
+    """Env steps at the first episode whose rolling success rate (``window`` episodes) reaches ``level``."""
+    i = episode_to(rows, level, window)
+    return math.nan if i is None else float(rows[i]["env_steps"])
 
 
 def run_jobs(one, jobs: list[tuple], workers: int) -> list[dict]:

@@ -33,7 +33,7 @@ import torch
 from ..infer.readout import FALLBACK
 from .high_level import HighLevelBatch
 
-__all__ = ["SubgoalFilter", "CriticFilter", "NoFilter", "BEFORE_UPDATE", "FALLBACK"]
+__all__ = ["SubgoalFilter", "CriticFilter", "NoFilter", "BEFORE_UPDATE"]
 
 #: what Ĝt is before the critic's first update (with an outcome likelihood: before the first success):
 #: "g0", no filter; "completion", the configuration q favours most among those holding the sub-goals
@@ -41,11 +41,6 @@ __all__ = ["SubgoalFilter", "CriticFilter", "NoFilter", "BEFORE_UPDATE", "FALLBA
 #: first episode: holding a key, Ĝt is its door and the goal; holding nothing, the completion is
 #: empty and the high level reads G0.
 BEFORE_UPDATE = ("g0", "completion")
-
-#: Ĝt given the achieved sub-goals where none of the critic's samples holds them all
-#: (``infer.readout.FALLBACK``): "mode", the unconditional mode (it can name a route the agent can no
-#: longer take: holding the key of a route the critic has dropped, Ĝt is the other route);
-#: "completion", q's completion of the achieved set.
 
 
 class SubgoalFilter(Protocol):

@@ -19,7 +19,9 @@ from ..distributions.mrf import EXACT_LIMIT, PairwiseMRF
 __all__ = ["FALLBACK", "CriticReadout", "unique_rows", "RANKING_DRAWS", "MARGINAL_CHAINS", "INDEPENDENT_BURN_IN_FACTOR",
            "NEAR_TIE_STANDARD_ERRORS"]
 
-#: Ĝt given achieved sub-goals where no sample holds them all: the unconditional mode, or q's completion
+#: Ĝt given achieved sub-goals where no sample holds them all (``loop.filter_fallback``): "mode", the
+#: unconditional mode (it can name a route the agent can no longer take: holding the key of a route
+#: the critic has dropped, Ĝt is the other route); "completion", q's completion of the achieved set
 FALLBACK = ("mode", "completion")
 
 RANKING_DRAWS = 10_000  # independent draws behind G* (standard error of a probability <= 0.005)
@@ -77,12 +79,11 @@ class CriticReadout:
         # 0/1 matmul counts the given-but-off sites exactly (12x faster than a (B, U, N) broadcast)
         agree = (rows.to(configs.dtype) @ (1.0 - configs).T) == 0
         best = torch.where(agree, counts[None], torch.zeros_like(counts)[None]).argmax(-1)
-        best = torch.where(agree.any(-1), best, torch.full_like(best, mode))
+        missing = ~agree.any(-1)
+        best = torch.where(missing, torch.full_like(best, mode), best)
         out = configs[best].bool()
-        if fallback == "completion":
-            missing = ~agree.any(-1)
-            if missing.any():
-                out[missing] = self.completion(rows[missing]).bool()
+        if fallback == "completion" and missing.any():
+            out[missing] = self.completion(rows[missing]).bool()
         return out.reshape(given.shape)
 
     def _given_rows(self, given) -> torch.Tensor:
