@@ -18,6 +18,7 @@ per-episode statistics and leaves logging, progress bars and checkpoints to ``ex
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -33,7 +34,10 @@ from .protocols import LowLevel, SubgoalFilter
 from .schedules import LinearSchedule
 from .seeding import EVAL_LOW_LEVEL_STREAM, LOOP_STREAM, episode_seed, stream_rng
 
-__all__ = ["LoopConfig", "EpisodeStats", "HRLLoop", "episode_seed"]
+__all__ = ["LoopConfig", "EpisodeStats", "HRLLoop", "episode_seed", "EXPLORE_BY_SUCCESS"]
+
+#: which ε's the recent success rate caps (``LoopConfig.explore_by_success``)
+EXPLORE_BY_SUCCESS = ("none", "high", "both")
 
 
 @dataclass
@@ -75,6 +79,10 @@ class LoopConfig:
     # reward, then run over the rest of the budget (with no reward seen there is nothing to exploit,
     # and decaying exploration only makes a late first success less likely)
     schedule_from: str = "start"
+    # ε capped by recent success: "none", "high" (the high level's ε) or "both" (and the low level's)
+    # is at most max(its end value, 1 - the success rate of the last outcome_window training
+    # episodes), so exploration falls as soon as episodes succeed, not only as the budget passes
+    explore_by_success: str = "none"
     critic_every: int = 1                       # high-level updates pooled into one critic update
     # how a pool of K minibatches weighs in the likelihood (Eq. 4): "mean" (weight 1/K: an update aims
     # at the posterior of one minibatch) or "sum" (weight 1: of all K x B transitions). Equal for K = 1
@@ -104,6 +112,9 @@ class LoopConfig:
             raise ValueError(f"loop.filter_refresh must be 'option' or 'episode', got {self.filter_refresh!r}")
         if self.schedule_from not in ("start", "first_reward"):
             raise ValueError(f"loop.schedule_from must be 'start' or 'first_reward', got {self.schedule_from!r}")
+        if self.explore_by_success not in EXPLORE_BY_SUCCESS:
+            raise ValueError(f"loop.explore_by_success must be one of {', '.join(EXPLORE_BY_SUCCESS)}, "
+                             f"got {self.explore_by_success!r}")
         if self.filter_fallback not in FALLBACK:
             raise ValueError(f"loop.filter_fallback must be one of {', '.join(FALLBACK)}, got {self.filter_fallback!r}")
         if self.critic_pool_weight not in ("mean", "sum"):
@@ -133,6 +144,7 @@ class HRLLoop:
         self._filter = LinearSchedule(config.filter_start, config.filter_end, config.filter_fraction)
         self.first_reward_step: int | None = None       # env step of the first extrinsic reward
         self.success_rate = np.zeros(len(self.names))   # per-goal moving average of option success
+        self._recent: deque[bool] = deque(maxlen=config.outcome_window)  # success of recent training episodes
         self._pending: list = []                # high-level minibatches waiting for the next critic update
         self._ghat: np.ndarray | None = None    # Ĝt as the loop sees it (refreshed per option or per episode)
         self._ghat_given: np.ndarray | None = None   # the achieved set Ĝt was last read with
@@ -214,6 +226,7 @@ class HRLLoop:
             if train:
                 p = self.schedule_progress()
                 explore, low_explore, filter_eps = self._explore(p), self._low_explore(p), self._filter(p)
+                explore, low_explore = self._cap_by_success(explore, low_explore)
             allowed = self._allowed(achieved, filter_eps)
             g = self.high.select(obs, allowed, explore)
             chosen.append(self.names[g])
@@ -265,10 +278,22 @@ class HRLLoop:
                         tally.record(self.filter.update(pooled))
         if train:
             self.filter.end_episode(visited, tally.success)
+            self._recent.append(bool(tally.success))
             self.episodes += 1
             if self._break_cycles:
                 tally.put("low/revisits", float(revisits))
         return tally.stats(self.env_steps, options, explore_eps=explore, filter_eps=filter_eps, chosen=chosen)
+
+    def _cap_by_success(self, explore: float, low_explore: float) -> tuple[float, float]:
+        """The two ε's under ``explore_by_success``: at most max(end, 1 - recent success rate)."""
+        mode = self.cfg.explore_by_success
+        if mode == "none":
+            return explore, low_explore
+        failing = 1.0 - sum(self._recent) / max(self.cfg.outcome_window, 1)
+        explore = min(explore, max(self.cfg.explore_end, failing))
+        if mode == "both":
+            low_explore = min(low_explore, max(self.cfg.low_explore_end, failing))
+        return explore, low_explore
 
     def train_chunk(self) -> list[EpisodeStats]:
         """The trainer protocol used by ``experiments.run``: one training episode per call."""
@@ -280,6 +305,7 @@ class HRLLoop:
              "rng": self.rng.bit_generator.state, "high": self.high.state_dict(),
              "high_rng": self.high.rng.bit_generator.state, "filter": self.filter.state_dict(),
              "success_rate": self.success_rate.copy(), "first_reward_step": self.first_reward_step,
+             "recent_success": list(self._recent),
              # minibatches waiting for the next pooled critic update (the pool spans episodes)
              "pending": [{f.name: getattr(b, f.name) for f in fields(b)} for b in self._pending]}
         if self.low.learns:
@@ -294,6 +320,8 @@ class HRLLoop:
         self.high.rng.bit_generator.state = s["high_rng"]
         self.filter.load_state_dict(s["filter"])
         self.first_reward_step = s.get("first_reward_step")
+        self._recent.clear()
+        self._recent.extend(bool(x) for x in s.get("recent_success", []))
         self._pending = [TDBatch(**b) for b in s.get("pending", [])]
         if "success_rate" in s:
             self.success_rate = np.asarray(s["success_rate"], dtype=float).copy()

@@ -283,6 +283,36 @@ def test_schedules_can_start_at_the_first_extrinsic_reward():
         _loop(extra=["loop.schedule_from=later"])
 
 
+def test_recent_success_caps_the_exploration_it_is_asked_to_cap():
+    """explore_by_success: ε is at most max(end, 1 - success rate of the last outcome_window episodes)."""
+    window = ["loop.outcome_window=4"]
+    expect = {"none": (1.0, 1.0), "high": (0.5, 1.0), "both": (0.5, 0.5)}
+    for mode, (high_eps, low_eps) in expect.items():
+        loop = _loop(extra=window + [f"loop.explore_by_success={mode}"])
+        loop._recent.extend([True, False, True])        # 2 successes in a window of 4: the rate is 0.5
+        assert loop._cap_by_success(1.0, 1.0) == pytest.approx((high_eps, low_eps))
+        assert loop._cap_by_success(0.2, 0.3) == pytest.approx((0.2, 0.3))    # never above the schedule
+        loop._recent.extend([True, True, True, True])      # every recent episode succeeded: the end values
+        capped = loop._cap_by_success(1.0, 1.0)
+        assert capped == pytest.approx({"none": (1.0, 1.0), "high": (0.05, 1.0), "both": (0.05, 0.05)}[mode])
+    # the loop applies the cap to the ε it explores with, records each training episode's success,
+    # and a checkpoint carries the window
+    loop = _loop(extra=window + ["loop.explore_by_success=both"])
+    loop._explore = loop._low_explore = lambda progress: 0.9
+    calls = []
+    act = loop.low.act
+    loop.low.act = lambda obs, goal, eps, env: calls.append(eps) or act(obs, goal, eps, env)
+    loop._recent.extend([True, True, True, False])
+    stats = loop.run_episode(train=True)
+    assert stats.explore_eps == pytest.approx(0.25) and calls[0] == pytest.approx(0.25)
+    assert list(loop._recent) == [True, True, False, stats.success]
+    other = _loop(extra=window + ["loop.explore_by_success=both"])
+    other.load_state_dict(loop.state_dict())
+    assert list(other._recent) == list(loop._recent)
+    with pytest.raises(ValueError, match="loop.explore_by_success must be one of none, high, both"):
+        _loop(extra=["loop.explore_by_success=always"])
+
+
 def test_low_level_shaping_uses_the_env_potential_and_refuses_to_run_without_one():
     import torch
 
