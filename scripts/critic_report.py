@@ -11,7 +11,8 @@ the runner-up's. Mean ± s.e. over seeds.
 ``--after-first`` adds a second table on the stretch from a seed's first success to 90% success (the
 episodes that close the 20-episode window): their number, success rate and mean length, the
 high-level ε at the first success, and for HUBS-GO the mean size of Ĝt there (the critic's mode and
-the safeguard's additions, ``critic/set_size`` + ``critic/kept`` of ``metrics.csv``).
+the safeguard's additions, ``critic/set_size`` + ``critic/kept`` of ``metrics.csv``), the options per
+episode, and the low level's cycle-breaking random steps per option (``low/revisits`` over ``options``).
 
     python scripts/critic_report.py runs/sweeps/critic [--tasks keydoor threepair ...] [--no-eval] [--after-first]
 """
@@ -80,7 +81,7 @@ def fmt(values) -> str:
 def _stretch(m: pd.DataFrame) -> dict[str, float]:
     """The episodes from the first success to the one where the rolling success first reaches 0.9."""
     nan = {k: math.nan for k in ("stretch_episodes", "stretch_success", "stretch_length", "stretch_eps",
-                                 "stretch_ghat")}
+                                 "stretch_ghat", "stretch_options", "stretch_revisits")}
     success = m["success"].astype(float)
     i1 = episode_to(m.to_dict("records"))
     if not success.any() or i1 is None:
@@ -89,9 +90,13 @@ def _stretch(m: pd.DataFrame) -> dict[str, float]:
     w = m.iloc[i0:i1 + 1]
     ghat = (float((w["critic/set_size"] + w["critic/kept"]).mean())
             if {"critic/set_size", "critic/kept"} <= set(m.columns) else math.nan)
+    options = float(w["options"].mean()) if "options" in m.columns else math.nan
+    # the low level's cycle-breaking random steps per option: how far it is from reaching its sub-goals
+    revisits = (float(w["low/revisits"].sum() / w["options"].sum())
+                if {"options", "low/revisits"} <= set(m.columns) and w["options"].sum() > 0 else math.nan)
     return {"stretch_episodes": float(i1 - i0), "stretch_success": float(w["success"].mean()),
             "stretch_length": float(w["length"].mean()), "stretch_eps": float(w["explore_eps"].iloc[0]),
-            "stretch_ghat": ghat}
+            "stretch_ghat": ghat, "stretch_options": options, "stretch_revisits": revisits}
 
 
 def main() -> None:
@@ -148,12 +153,14 @@ def main() -> None:
     if args.after_first:
         print()
         print("| task | agent | episodes from the first success to 90% | their success rate | their mean length | "
-              "high-level ε at the first success | size of Ĝt there |")
-        print("|---|---|---|---|---|---|---|")
+              "high-level ε at the first success | size of Ĝt there | options per episode there | "
+              "low-level revisits per option there |")
+        print("|---|---|---|---|---|---|---|---|---|")
         for (task, var), g in df.groupby(["task", "variant"], sort=False):
             print(f"| {task} | {var} | {fmt(list(g['stretch_episodes']))} | {fmt(list(g['stretch_success']))} | "
                   f"{fmt(list(g['stretch_length']))} | {fmt(list(g['stretch_eps']))} | "
-                  f"{fmt(list(g['stretch_ghat'])) if g['stretch_ghat'].notna().any() else ''} |")
+                  f"{fmt(list(g['stretch_ghat'])) if g['stretch_ghat'].notna().any() else ''} | "
+                  f"{fmt(list(g['stretch_options']))} | {fmt(list(g['stretch_revisits']))} |")
     if "top" in df:
         print()
         for _, r in df[df["top"].notna()].iterrows():

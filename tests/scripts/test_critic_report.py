@@ -16,7 +16,8 @@ import critic_report  # noqa: E402  (a script module, not a package)
 def _log(success: list[int], hubsgo: bool = True) -> pd.DataFrame:
     n = len(success)
     m = pd.DataFrame({"success": success, "length": [100 + i for i in range(n)],
-                      "explore_eps": [1.0 - i / n for i in range(n)]})
+                      "explore_eps": [1.0 - i / n for i in range(n)], "options": [10 + i % 3 for i in range(n)],
+                      "low/revisits": [float(i) for i in range(n)]})
     if hubsgo:
         m["critic/set_size"] = [3.0] * n
         m["critic/kept"] = [float(i % 2) for i in range(n)]
@@ -33,6 +34,9 @@ def test_stretch_spans_the_first_success_to_the_first_full_window():
     assert out["stretch_length"] == pytest.approx(sum(100 + i for i in range(5, 24)) / 19)
     assert out["stretch_eps"] == pytest.approx(1.0 - 5 / len(success))
     assert out["stretch_ghat"] == pytest.approx(3.0 + sum(i % 2 for i in range(5, 24)) / 19)
+    assert out["stretch_options"] == pytest.approx(sum(10 + i % 3 for i in range(5, 24)) / 19)
+    # revisits per option: the stretch's revisits over its options, not a mean of per-episode ratios
+    assert out["stretch_revisits"] == pytest.approx(sum(range(5, 24)) / sum(10 + i % 3 for i in range(5, 24)))
 
 
 def test_stretch_is_undefined_without_a_success_or_without_90_percent():
