@@ -91,7 +91,7 @@ def _stretch(m: pd.DataFrame) -> dict[str, float]:
     ghat = (float((w["critic/set_size"] + w["critic/kept"]).mean())
             if {"critic/set_size", "critic/kept"} <= set(m.columns) else math.nan)
     options = float(w["options"].mean()) if "options" in m.columns else math.nan
-    # the low level's cycle-breaking random steps per option: how far it is from reaching its sub-goals
+    # the low level's cycle-breaking random steps per option: how often it loops instead of reaching its sub-goal
     revisits = (float(w["low/revisits"].sum() / w["options"].sum())
                 if {"options", "low/revisits"} <= set(m.columns) and w["options"].sum() > 0 else math.nan)
     return {"stretch_episodes": float(i1 - i0), "stretch_success": float(w["success"].mean()),
