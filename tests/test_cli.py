@@ -86,14 +86,27 @@ def test_console_script_is_installed():
     ("nosection.x=3", ["unknown section 'nosection'"]),
     ("env.nonsense=3", ["cannot be built with --set env.nonsense=3", "'nonsense'"]),       # caught at build
     ("loop.schedule_from=later", ["cannot be built with --set loop.schedule_from=later", "schedule_from"]),
+    ("loop.outcome_window=-1", ["loop.outcome_window must be a positive integer, got -1"]),
 ])
-def test_bad_set_key_one_line_naming_section_and_valid_keys(setting, needles, capsys, tmp_path):
-    out = tmp_path / "o"
-    assert main(["train", "keydoor", "--out", str(out), "--no-progress", "--steps", "100", "--set", setting]) == 2
+@pytest.mark.parametrize("agent", ["hubsgo", "hdqn"])
+def test_bad_set_key_one_line_naming_section_and_valid_keys(setting, needles, agent, capsys, tmp_path):
+    out = tmp_path / "runs" / "o"
+    assert main(["train", "keydoor", "--agent", agent, "--out", str(out), "--no-progress", "--steps", "100",
+                 "--set", setting]) == 2
     line = _one_error_line(capsys)
     for needle in needles:
         assert needle in line, (needle, line)
-    assert not (out / "config.yaml").exists()
+    assert not out.exists(), "a run that cannot be built left its --out folder behind"
+
+
+def test_a_run_that_cannot_be_built_keeps_an_existing_out_folder(capsys, tmp_path):
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    assert main(["train", "keydoor", "--out", str(out), "--no-progress", "--steps", "100",
+                 "--set", "env.nonsense=3"]) == 2
+    assert "cannot be built" in _one_error_line(capsys)
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]
 
 
 def test_missing_robosuite_names_the_extra(monkeypatch, capsys, tmp_path):

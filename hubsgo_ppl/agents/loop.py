@@ -123,6 +123,8 @@ class LoopConfig:
             raise ValueError(f"loop.filter_start and loop.filter_end must be in [0, 1], got {self.filter_start!r}, {self.filter_end!r}")
         if int(self.critic_every) < 1:
             raise ValueError(f"loop.critic_every must be a positive integer, got {self.critic_every!r}")
+        if int(self.outcome_window) < 1:
+            raise ValueError(f"loop.outcome_window must be a positive integer, got {self.outcome_window!r}")
 
 
 class HRLLoop:

@@ -20,9 +20,9 @@ candidates). ``init_from`` in config.yaml records a run started from another run
 level and/or low level (``--init-from``, ``experiments/transfer.py``).
 
 ``--resume`` continues from the checkpoint: rows that the CSV logs gained after it (a run killed with
-``kill -9``) are cut off first, so a killed-and-resumed run ends with the files of an uninterrupted
-one (TensorBoard hides the events after the checkpoint). A run that stopped before its first
-checkpoint is started afresh.
+``kill -9``) are cut off first, so a killed-and-resumed run ends with the files of an uninterrupted one
+(TensorBoard hides the events after the checkpoint). A run that stopped before its first checkpoint is
+started afresh; one that cannot be built leaves no folder of its own behind.
 """
 
 from __future__ import annotations
@@ -47,8 +47,7 @@ from ..agents.loop import HRLLoop
 from ..agents.seeding import CRITIC_STREAM, EVAL_SEED_OFFSET, episode_seed, stream_seed
 from ..envs import get_task, register
 from ..envs.subset import catalogue_order, check_subset, make_subset
-from .io import (CheckpointError, is_temp_file, load_checkpoint, save_torch, truncate_csv, write_json,
-                 write_yaml)
+from .io import CheckpointError, is_temp_file, load_checkpoint, save_torch, truncate_csv, write_json, write_yaml
 from .logger import CSVOutput, Logger, TensorBoardOutput, read_csv_rows
 from .plots import plot_learning_curve
 
@@ -111,10 +110,8 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
     try:        # the preset, the task's settings and --set merged and validated (agents/config.py)
         hyper = resolve_hyper(info.family, info.name, cfg.agent, cfg.overrides, steps=cfg.steps,
                               low_level=cfg.low_level)
-    except ConfigError as exc:
-        raise RunError(str(exc)) from None
-    except ValueError as exc:
-        if not cfg.overrides:
+    except ValueError as exc:           # a ConfigError always; another ValueError where --set caused it
+        if not (cfg.overrides or isinstance(exc, ConfigError)):
             raise
         raise RunError(str(exc)) from None
     resolved: dict[str, Any] = {
@@ -273,6 +270,7 @@ def _start(cfg: RunConfig, out: Path, resume: bool):
             plan = plan_transfer(resolved, cfg.init_from, cfg.transfer)
         except TransferError as exc:
             raise RunError(str(exc)) from None
+    created = not out.exists()
     _check_writable(out)
     removed = _tidy(out, RUN_FILES)
     if removed:
@@ -284,8 +282,11 @@ def _start(cfg: RunConfig, out: Path, resume: bool):
               f"{resolved['task']!r}; not candidates in this run: {', '.join(left)}", file=sys.stderr)
     try:
         env, agent = _build(resolved)
-    except (TypeError, ValueError) as exc:
-        if not cfg.overrides:
+    except BaseException as exc:
+        if created:
+            with contextlib.suppress(OSError):
+                out.rmdir()             # only if still empty
+        if not cfg.overrides or not isinstance(exc, (TypeError, ValueError)):
             raise
         msg = " ".join(str(exc).split())
         raise RunError(f"the run cannot be built with --set {' --set '.join(cfg.overrides)}: {msg}") from None
