@@ -158,14 +158,42 @@ def pyro_floor(spec: str = "fourroom-specific", rounds: int = 5, repeats: int = 
     return best
 
 
+def draw_times(specs: tuple[str, ...] = ("keydoor-specific", "keydoor_n17-specific", "keydoor_n65-specific"),
+               rounds: int = 5, repeats: int = 40) -> dict[str, tuple[int, float]]:
+    """Best-of-``rounds`` ms of one MH draw of the critic (the guide's sample: S chains x ``burn_in``
+    sweeps from the persistent chains, as in every update), on each maze spec: ``{spec: (N, ms)}``."""
+    from hubsgo_ppl.specs import load_model_spec
+
+    out = {}
+    for spec in specs:
+        critic = SubgoalCritic.from_spec(load_model_spec(spec), seed=0)
+        critic._draw()                      # compiles the scan
+        best = math.inf
+        for _ in range(rounds):
+            t = time.perf_counter()
+            for _ in range(repeats):
+                critic._draw()
+            best = min(best, 1000 * (time.perf_counter() - t) / repeats)
+        out[spec] = (critic.n, best)
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--repeats", type=int, default=20)
     parser.add_argument("--seeds", type=int, default=3, help="seeds for the learning-budget runs")
     parser.add_argument("--floor", default=None, metavar="SPEC",
                         help="only time an update on this spec, compiled and eager, against a bare TraceGraph_ELBO step and the MH sweeps")
+    parser.add_argument("--draws", action="store_true",
+                        help="only time one MH draw of the critic (S chains x burn-in sweeps) on the KeyDoor specs, N = 5, 17, 65")
     args = parser.parse_args()
     torch.set_num_threads(1)
+    if args.draws:
+        print(f"torch {torch.__version__}, pyro {pyro.__version__}, 1 thread")
+        print("\n| spec | N | ms per draw (best of 5 x 40) |\n|---|---|---|")
+        for spec, (n, ms) in draw_times().items():
+            print(f"| {spec} | {n} | {ms:.2f} |")
+        return
     if args.floor:
         best = pyro_floor(args.floor)
         update = best["critic.update (compiled, default)"]
