@@ -38,6 +38,8 @@ __all__ = ["LoopConfig", "EpisodeStats", "HRLLoop", "episode_seed", "EXPLORE_BY_
 
 #: which ε's the recent success rate caps (``LoopConfig.explore_by_success``)
 EXPLORE_BY_SUCCESS = ("none", "high", "both")
+#: what that rate is taken over (``LoopConfig.success_rate_over``)
+SUCCESS_RATE_OVER = ("window", "played")
 
 
 @dataclass
@@ -83,6 +85,11 @@ class LoopConfig:
     # is at most max(its end value, 1 - the success rate of the last outcome_window training
     # episodes), so exploration falls as soon as episodes succeed, not only as the budget passes
     explore_by_success: str = "none"
+    # that rate: "window", the successes of the last outcome_window episodes over outcome_window (the
+    # episodes not yet played count as failures); "played", (successes + 1) / (episodes + 2) over the
+    # episodes the window holds (Laplace's rule), so a first success lowers ε at once, and failures
+    # after it raise ε again
+    success_rate_over: str = "window"
     critic_every: int = 1                       # high-level updates pooled into one critic update
     # how a pool of K minibatches weighs in the likelihood (Eq. 4): "mean" (weight 1/K: an update aims
     # at the posterior of one minibatch) or "sum" (weight 1: of all K x B transitions). Equal for K = 1
@@ -115,6 +122,9 @@ class LoopConfig:
         if self.explore_by_success not in EXPLORE_BY_SUCCESS:
             raise ValueError(f"loop.explore_by_success must be one of {', '.join(EXPLORE_BY_SUCCESS)}, "
                              f"got {self.explore_by_success!r}")
+        if self.success_rate_over not in SUCCESS_RATE_OVER:
+            raise ValueError(f"loop.success_rate_over must be one of {', '.join(SUCCESS_RATE_OVER)}, "
+                             f"got {self.success_rate_over!r}")
         if self.filter_fallback not in FALLBACK:
             raise ValueError(f"loop.filter_fallback must be one of {', '.join(FALLBACK)}, got {self.filter_fallback!r}")
         if self.critic_pool_weight not in ("mean", "sum"):
@@ -291,7 +301,10 @@ class HRLLoop:
         mode = self.cfg.explore_by_success
         if mode == "none":
             return explore, low_explore
-        failing = 1.0 - sum(self._recent) / max(self.cfg.outcome_window, 1)
+        if self.cfg.success_rate_over == "played":
+            failing = 1.0 - (sum(self._recent) + 1.0) / (len(self._recent) + 2.0)
+        else:
+            failing = 1.0 - sum(self._recent) / max(self.cfg.outcome_window, 1)
         explore = min(explore, max(self.cfg.explore_end, failing))
         if mode == "both":
             low_explore = min(low_explore, max(self.cfg.low_explore_end, failing))
