@@ -86,9 +86,9 @@ class LoopConfig:
     # episodes), so exploration falls as soon as episodes succeed, not only as the budget passes
     explore_by_success: str = "none"
     # that rate: "window", the successes of the last outcome_window episodes over outcome_window (the
-    # episodes not yet played count as failures); "played", (successes + 1) / (episodes + 2) over the
-    # episodes the window holds (Laplace's rule), so a first success lowers ε at once, and failures
-    # after it raise ε again
+    # episodes not yet played count as failures); "played", successes / (episodes + 1) over the
+    # episodes the window holds (one more failure presumed), so nothing is capped before the first
+    # success, a first success lowers ε at once, and failures after it raise ε again
     success_rate_over: str = "window"
     critic_every: int = 1                       # high-level updates pooled into one critic update
     # how a pool of K minibatches weighs in the likelihood (Eq. 4): "mean" (weight 1/K: an update aims
@@ -302,7 +302,7 @@ class HRLLoop:
         if mode == "none":
             return explore, low_explore
         if self.cfg.success_rate_over == "played":
-            failing = 1.0 - (sum(self._recent) + 1.0) / (len(self._recent) + 2.0)
+            failing = 1.0 - sum(self._recent) / (len(self._recent) + 1.0)
         else:
             failing = 1.0 - sum(self._recent) / max(self.cfg.outcome_window, 1)
         explore = min(explore, max(self.cfg.explore_end, failing))

@@ -313,23 +313,25 @@ def test_recent_success_caps_the_exploration_it_is_asked_to_cap():
         _loop(extra=["loop.explore_by_success=always"])
 
 
-def test_the_success_rate_over_played_episodes_follows_laplaces_rule():
-    """success_rate_over=played: the cap is 1 - (successes + 1) / (episodes + 2) over the window's episodes."""
+def test_the_success_rate_over_played_episodes_caps_from_the_first_success():
+    """success_rate_over=played: the cap is 1 - successes / (episodes + 1) over the window's episodes."""
     loop = _loop(extra=["loop.outcome_window=4", "loop.explore_by_success=both", "loop.success_rate_over=played"])
-    assert loop._cap_by_success(1.0, 1.0) == pytest.approx((0.5, 0.5))          # nothing played: 1/2
-    loop._recent.append(True)                                                  # a first success: 2/3
-    assert loop._cap_by_success(1.0, 1.0) == pytest.approx((1 / 3, 1 / 3))
-    loop._recent.extend([False, False])                                        # then two failures: 2/5
-    assert loop._cap_by_success(1.0, 1.0) == pytest.approx((0.6, 0.6))
-    loop._recent.extend([True, True, True, True])                              # the window holds 4: 5/6
-    assert loop._cap_by_success(1.0, 1.0) == pytest.approx((1 / 6, 1 / 6))
-    loop.cfg.explore_end = loop.cfg.low_explore_end = 0.2
-    assert loop._cap_by_success(1.0, 1.0) == pytest.approx((0.2, 0.2))         # not below the end values
-    loop._recent.extend([True, False, False, False])                           # 2/6
-    assert loop._cap_by_success(0.9, 0.5) == pytest.approx((2 / 3, 0.5))       # nor above the schedule
+    assert loop._cap_by_success(1.0, 1.0) == pytest.approx((1.0, 1.0))          # nothing played: no cap
+    loop._recent.extend([False, False])
+    assert loop._cap_by_success(1.0, 1.0) == pytest.approx((1.0, 1.0))          # no success yet: no cap
+    loop._recent.append(True)                                                  # a first success: 1/4
+    assert loop._cap_by_success(1.0, 1.0) == pytest.approx((0.75, 0.75))
+    loop._recent.extend([True, True, True])                                    # 4 of the window's 4: 4/5
+    assert loop._cap_by_success(1.0, 1.0) == pytest.approx((0.2, 0.2))
+    loop.cfg.explore_end = loop.cfg.low_explore_end = 0.3
+    assert loop._cap_by_success(1.0, 1.0) == pytest.approx((0.3, 0.3))         # not below the end values
+    loop._recent.extend([False, False])                                        # 2 of 4: 2/5
+    assert loop._cap_by_success(0.9, 0.5) == pytest.approx((0.6, 0.5))         # nor above the schedule
     window = _loop(extra=["loop.outcome_window=4", "loop.explore_by_success=both"])
-    window._recent.append(True)                                                # the default: 1/4
+    window._recent.append(True)                                                # the default: 1/4 of the window
     assert window._cap_by_success(1.0, 1.0) == pytest.approx((0.75, 0.75))
+    window._recent.extend([True, False])                                       # 2/4
+    assert window._cap_by_success(1.0, 1.0) == pytest.approx((0.5, 0.5))
     with pytest.raises(ValueError, match="loop.success_rate_over must be one of window, played"):
         _loop(extra=["loop.success_rate_over=all"])
 
