@@ -29,7 +29,9 @@ import torch
 from ..infer.readout import FALLBACK
 from ..infer.tdbatch import TDBatch
 from .episode import EpisodeStats, EpisodeTally, env_seed, reset_episode
+from .filters import CriticFilter
 from .high_level import HighLevelDQN
+from .low_level import GoalDQN
 from .protocols import LowLevel, SubgoalFilter
 from .schedules import LinearSchedule
 from .seeding import EVAL_LOW_LEVEL_STREAM, LOOP_STREAM, episode_seed, stream_rng
@@ -40,6 +42,8 @@ __all__ = ["LoopConfig", "EpisodeStats", "HRLLoop", "episode_seed", "EXPLORE_BY_
 EXPLORE_BY_SUCCESS = ("none", "high", "both")
 #: what that rate is taken over (``LoopConfig.success_rate_over``)
 SUCCESS_RATE_OVER = ("window", "played")
+#: how the learned low level weighs the sub-goals in its TD loss (``LoopConfig.low_goal_weight``)
+LOW_GOAL_WEIGHT = ("uniform", "marginal")
 
 
 @dataclass
@@ -90,6 +94,11 @@ class LoopConfig:
     # episodes the window holds (one more failure presumed), so nothing is capped before the first
     # success, a first success lowers ε at once, and failures after it raise ε again
     success_rate_over: str = "window"
+    # "uniform": the learned low level's TD loss weighs every sub-goal alike (h-DQN's all-goal
+    # relabelling); "marginal" (HUBS-GO, a learned grid low level): after each critic update a sub-goal
+    # weighs its marginal P(w_g = 1), at least 1 - filter_end (the share of choices that still read
+    # G0), so the low level's capacity goes to the sub-goals the critic believes in
+    low_goal_weight: str = "uniform"
     critic_every: int = 1                       # high-level updates pooled into one critic update
     # how a pool of K minibatches weighs in the likelihood (Eq. 4): "mean" (weight 1/K: an update aims
     # at the posterior of one minibatch) or "sum" (weight 1: of all K x B transitions). Equal for K = 1
@@ -125,6 +134,9 @@ class LoopConfig:
         if self.success_rate_over not in SUCCESS_RATE_OVER:
             raise ValueError(f"loop.success_rate_over must be one of {', '.join(SUCCESS_RATE_OVER)}, "
                              f"got {self.success_rate_over!r}")
+        if self.low_goal_weight not in LOW_GOAL_WEIGHT:
+            raise ValueError(f"loop.low_goal_weight must be one of {', '.join(LOW_GOAL_WEIGHT)}, "
+                             f"got {self.low_goal_weight!r}")
         if self.filter_fallback not in FALLBACK:
             raise ValueError(f"loop.filter_fallback must be one of {', '.join(FALLBACK)}, got {self.filter_fallback!r}")
         if self.critic_pool_weight not in ("mean", "sum"):
@@ -158,6 +170,10 @@ class HRLLoop:
         self.success_rate = np.zeros(len(self.names))   # per-goal moving average of option success
         self._recent: deque[bool] = deque(maxlen=config.outcome_window)  # success of recent training episodes
         self._pending: list = []                # high-level minibatches waiting for the next critic update
+        weighable = isinstance(low, GoalDQN) and isinstance(subgoal_filter, CriticFilter)
+        if config.low_goal_weight == "marginal" and not weighable:
+            raise ValueError("loop.low_goal_weight=marginal needs a critic (agent hubsgo) and a learned grid "
+                             "low level (GoalDQN); use loop.low_goal_weight=uniform")
         self._ghat: np.ndarray | None = None    # Ĝt as the loop sees it (refreshed per option or per episode)
         self._ghat_given: np.ndarray | None = None   # the achieved set Ĝt was last read with
         self._break_cycles = (config.low_break_cycles and low.learns
@@ -288,6 +304,10 @@ class HRLLoop:
                     if len(self._pending) >= cfg.critic_every:
                         pooled, self._pending = TDBatch.cat(self._pending, cfg.critic_pool_weight), []
                         tally.record(self.filter.update(pooled))
+                        if cfg.low_goal_weight == "marginal":
+                            floor = 1.0 - cfg.filter_end
+                            self.low.goal_weight = torch.as_tensor(
+                                np.maximum(self.filter.marginals(), floor), dtype=torch.float32)
         if train:
             self.filter.end_episode(visited, tally.success)
             self._recent.append(bool(tally.success))

@@ -65,6 +65,8 @@ class GoalDQN(LowLevelBase):
                                    after=(n_goals,), terminated=())
         self.steps = 0
         self.explored = False               # whether the last act() took a random action
+        # (N,) weights of the sub-goals in the TD loss (None: all alike); loop.low_goal_weight sets them
+        self.goal_weight: torch.Tensor | None = None
 
     def _q(self, net: nn.Module, obs: torch.Tensor) -> torch.Tensor:
         return net(obs).view(*obs.shape[:-1], self.n_goals, self.n_actions)
@@ -100,6 +102,8 @@ class GoalDQN(LowLevelBase):
         q = self._q(self.q, b["obs"])                                    # (B, N, A)
         q_a = q.gather(2, b["action"][:, None, None].expand(-1, self.n_goals, 1)).squeeze(2)
         weight = (~before).float()          # a goal already achieved is never the option's target
+        if self.goal_weight is not None:
+            weight = weight * self.goal_weight
         loss = (weight * (q_a - y).pow(2)).sum() / weight.sum().clamp_min(1.0)
         self.opt.zero_grad()
         loss.backward()
@@ -110,7 +114,8 @@ class GoalDQN(LowLevelBase):
 
     def state_dict(self) -> dict[str, Any]:
         return {"q": self.q.state_dict(), "q_target": self.q_target.state_dict(),
-                "opt": self.opt.state_dict(), "buffer": self.buffer.state_dict(), "steps": self.steps}
+                "opt": self.opt.state_dict(), "buffer": self.buffer.state_dict(), "steps": self.steps,
+                "goal_weight": self.goal_weight}
 
     def load_state_dict(self, s: dict[str, Any]) -> None:
         self.q.load_state_dict(s["q"])
@@ -118,6 +123,7 @@ class GoalDQN(LowLevelBase):
         self.opt.load_state_dict(s["opt"])
         self.buffer.load_state_dict(s["buffer"])
         self.steps = int(s["steps"])
+        self.goal_weight = s.get("goal_weight")
 
 
 class ScriptedLowLevel(LowLevelBase):

@@ -336,6 +336,38 @@ def test_the_success_rate_over_played_episodes_caps_from_the_first_success():
         _loop(extra=["loop.success_rate_over=all"])
 
 
+def test_marginal_goal_weights_follow_the_critic_after_each_update():
+    """low_goal_weight=marginal: after a critic update the low level weighs g by max(P(w_g = 1), 1 - filter_end)."""
+    from hubsgo_ppl.graph import SubgoalGraph
+    from hubsgo_ppl.infer.critic import SubgoalCritic
+
+    register()
+    names = ["yellow_key", "yellow_door", "blue_key", "blue_door", "goal"]
+    SPARSE = {"strength": 3.0, "field": -2.0}
+    graph = SubgoalGraph(names, [("yellow_key", "yellow_door", 1), ("blue_key", "blue_door", 1)])
+    cfg = apply_overrides(preset("minigrid"), SMALL + ["loop.low_goal_weight=marginal", "loop.critic_every=1",
+                                                       "loop.filter_end=0.6"])
+    cfg["steps"] = 600
+    critic = SubgoalCritic(graph, prior="ising", prior_params=SPARSE, likelihood_params={"scale": 0.1},
+                           seed=0)                          # a TD likelihood: updates from the first minibatch
+    loop = build_agent("hubsgo", make("keydoor", max_steps=60), cfg, seed=5, critic=critic)
+    assert loop.low.goal_weight is None                     # all alike before the critic's first update
+    while loop.env_steps < 200:
+        loop.run_episode(train=True)
+    expected = np.maximum(loop.filter.marginals(), 0.4)
+    assert expected.min() == pytest.approx(0.4) and expected.max() > 0.4       # the floor and the marginals act
+    assert np.allclose(loop.low.goal_weight.numpy(), expected, atol=1e-6)
+    other = build_agent("hubsgo", make("keydoor", max_steps=60), cfg, seed=5,
+                        critic=SubgoalCritic(graph, prior="ising", prior_params=SPARSE,
+                                             likelihood_params={"scale": 0.1}, seed=0))
+    other.load_state_dict(loop.state_dict())
+    assert torch.equal(other.low.goal_weight, loop.low.goal_weight)
+    with pytest.raises(ValueError, match="low_goal_weight=marginal needs a critic"):
+        _loop(extra=["loop.low_goal_weight=marginal"])                        # h-DQN has none
+    with pytest.raises(ValueError, match="loop.low_goal_weight must be one of uniform, marginal"):
+        _loop(extra=["loop.low_goal_weight=ranked"])
+
+
 def test_low_level_shaping_uses_the_env_potential_and_refuses_to_run_without_one():
     import torch
 

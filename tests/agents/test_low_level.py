@@ -31,6 +31,25 @@ def test_update_is_the_all_goal_td_loss_computed_by_hand():
     assert not torch.equal(next(low.q.parameters()), next(q.parameters()))              # it stepped
 
 
+def test_goal_weights_scale_each_sub_goal_in_the_td_loss():
+    low = _dqn()
+    low.goal_weight = torch.tensor([5.0, 3.0, 0.5])
+    obs, nxt = np.array([0.1, 0.2, 0.3], np.float32), np.array([0.4, -0.1, 0.2], np.float32)
+    before, after = np.array([True, False, False]), np.array([True, True, False])
+    q, q_target = copy.deepcopy(low.q), copy.deepcopy(low.q_target)
+    diag = low.observe(obs, 1, nxt, before, after, False)
+    with torch.no_grad():
+        qa = q(torch.as_tensor(obs)).view(3, 2)[:, 1]
+        q_next = q_target(torch.as_tensor(nxt)).view(3, 2).max(-1).values
+    y = torch.tensor([0.0, 1.0, 0.0]) + 0.9 * torch.tensor([1.0, 0.0, 1.0]) * q_next
+    # goal 0 is held (weight 0 whatever its goal weight); goals 1 and 2 weigh 3 and 0.5
+    expected = (3.0 * (qa[1] - y[1]) ** 2 + 0.5 * (qa[2] - y[2]) ** 2) / 3.5
+    assert diag["low/td_loss"] == pytest.approx(float(expected), rel=1e-6)
+    other = _dqn()
+    other.load_state_dict(low.state_dict())
+    assert torch.equal(other.goal_weight, low.goal_weight)
+
+
 def test_updates_start_after_learning_starts_and_follow_train_every():
     cfg = GoalDQNConfig(hidden=(8,), batch_size=2, learning_starts=3, train_every=2)
     low = GoalDQN(3, 2, 2, cfg, torch.Generator().manual_seed(0), np.random.default_rng(0))
