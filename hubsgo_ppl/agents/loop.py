@@ -95,9 +95,10 @@ class LoopConfig:
     # success, a first success lowers ε at once, and failures after it raise ε again
     success_rate_over: str = "window"
     # "uniform": the learned low level's TD loss weighs every sub-goal alike (h-DQN's all-goal
-    # relabelling); "marginal" (HUBS-GO, a learned grid low level): after each critic update a sub-goal
-    # weighs its marginal P(w_g = 1), at least 1 - filter_end (the share of choices that still read
-    # G0), so the low level's capacity goes to the sub-goals the critic believes in
+    # relabelling); "marginal" (HUBS-GO, a learned grid low level): after each critic update from
+    # evidence (an outcome critic: from the first success on) a sub-goal weighs its marginal
+    # P(w_g = 1), at least 1 - filter_end (the share of choices that still read G0), so the low
+    # level's capacity goes to the sub-goals the critic has learned to believe in
     low_goal_weight: str = "uniform"
     critic_every: int = 1                       # high-level updates pooled into one critic update
     # how a pool of K minibatches weighs in the likelihood (Eq. 4): "mean" (weight 1/K: an update aims
@@ -303,8 +304,9 @@ class HRLLoop:
                     self._pending.append(batch)
                     if len(self._pending) >= cfg.critic_every:
                         pooled, self._pending = TDBatch.cat(self._pending, cfg.critic_pool_weight), []
-                        tally.record(self.filter.update(pooled))
-                        if cfg.low_goal_weight == "marginal":
+                        learned = self.filter.update(pooled)    # {} where the critic had no evidence
+                        tally.record(learned)
+                        if learned and cfg.low_goal_weight == "marginal":
                             floor = 1.0 - cfg.filter_end
                             self.low.goal_weight = torch.as_tensor(
                                 np.maximum(self.filter.marginals(), floor), dtype=torch.float32)
