@@ -43,7 +43,7 @@ EXPLORE_BY_SUCCESS = ("none", "high", "both")
 #: what that rate is taken over (``LoopConfig.success_rate_over``)
 SUCCESS_RATE_OVER = ("window", "played")
 #: how the learned low level weighs the sub-goals in its TD loss (``LoopConfig.low_goal_weight``)
-LOW_GOAL_WEIGHT = ("uniform", "marginal")
+LOW_GOAL_WEIGHT = ("uniform", "marginal", "prior_marginal")
 
 
 @dataclass
@@ -98,7 +98,8 @@ class LoopConfig:
     # relabelling); "marginal" (HUBS-GO, a learned grid low level): after each critic update from
     # evidence (an outcome critic: from the first success on) a sub-goal weighs its marginal
     # P(w_g = 1), at least 1 - filter_end (the share of choices that still read G0), so the low
-    # level's capacity goes to the sub-goals the critic has learned to believe in
+    # level's capacity goes to the sub-goals the critic has learned to believe in; "prior_marginal":
+    # the same, and before that the prior's marginals, read once at the critic's first update call
     low_goal_weight: str = "uniform"
     critic_every: int = 1                       # high-level updates pooled into one critic update
     # how a pool of K minibatches weighs in the likelihood (Eq. 4): "mean" (weight 1/K: an update aims
@@ -172,9 +173,9 @@ class HRLLoop:
         self._recent: deque[bool] = deque(maxlen=config.outcome_window)  # success of recent training episodes
         self._pending: list = []                # high-level minibatches waiting for the next critic update
         weighable = isinstance(low, GoalDQN) and isinstance(subgoal_filter, CriticFilter)
-        if config.low_goal_weight == "marginal" and not weighable:
-            raise ValueError("loop.low_goal_weight=marginal needs a critic (agent hubsgo) and a learned grid "
-                             "low level (GoalDQN); use loop.low_goal_weight=uniform")
+        if config.low_goal_weight != "uniform" and not weighable:
+            raise ValueError(f"loop.low_goal_weight={config.low_goal_weight} needs a critic (agent hubsgo) and a "
+                             "learned grid low level (GoalDQN); use loop.low_goal_weight=uniform")
         self._ghat: np.ndarray | None = None    # Ĝt as the loop sees it (refreshed per option or per episode)
         self._ghat_given: np.ndarray | None = None   # the achieved set Ĝt was last read with
         self._break_cycles = (config.low_break_cycles and low.learns
@@ -306,7 +307,9 @@ class HRLLoop:
                         pooled, self._pending = TDBatch.cat(self._pending, cfg.critic_pool_weight), []
                         learned = self.filter.update(pooled)    # {} where the critic had no evidence
                         tally.record(learned)
-                        if learned and cfg.low_goal_weight == "marginal":
+                        weigh = cfg.low_goal_weight
+                        if weigh != "uniform" and (learned or (weigh == "prior_marginal"
+                                                               and self.low.goal_weight is None)):
                             floor = 1.0 - cfg.filter_end
                             self.low.goal_weight = torch.as_tensor(
                                 np.maximum(self.filter.marginals(), floor), dtype=torch.float32)

@@ -368,6 +368,32 @@ def test_marginal_goal_weights_follow_the_critic_after_each_update():
         _loop(extra=["loop.low_goal_weight=ranked"])
 
 
+@pytest.mark.parametrize("mode", ["marginal", "prior_marginal"])
+def test_before_the_first_success_only_prior_marginal_weighs_the_low_level(mode):
+    """An outcome critic does not update before the first success: "marginal" leaves the weights
+    uniform (None); "prior_marginal" reads the prior's marginals once, at the first update call."""
+    from hubsgo_ppl.graph import SubgoalGraph
+    from hubsgo_ppl.infer.critic import SubgoalCritic
+
+    register()
+    names = ["yellow_key", "yellow_door", "blue_key", "blue_door", "goal"]
+    graph = SubgoalGraph(names, [("yellow_key", "yellow_door", 1), ("blue_key", "blue_door", 1)])
+    cfg = apply_overrides(preset("minigrid"), SMALL + [f"loop.low_goal_weight={mode}", "loop.critic_every=1",
+                                                       "loop.filter_end=0.4"])
+    cfg["steps"] = 600
+    critic = SubgoalCritic(graph, prior="ising", prior_params={"strength": 3.0, "field": -2.0},
+                           likelihood="outcome", seed=0)
+    prior = np.maximum(critic.marginals().numpy(), 0.6)                # exact at N = 5
+    loop = build_agent("hubsgo", make("keydoor", max_steps=60), cfg, seed=5, critic=critic)
+    while loop.env_steps < 150:
+        loop.run_episode(train=True)
+    assert loop.high.ready() and len(loop.filter.outcomes()) == 0      # update calls, no success yet
+    if mode == "marginal":
+        assert loop.low.goal_weight is None
+    else:
+        assert np.allclose(loop.low.goal_weight.numpy(), prior, atol=1e-6) and prior.min() == pytest.approx(0.6) and prior.max() > 0.6
+
+
 def test_low_level_shaping_uses_the_env_potential_and_refuses_to_run_without_one():
     import torch
 
