@@ -307,12 +307,7 @@ class HRLLoop:
                         pooled, self._pending = TDBatch.cat(self._pending, cfg.critic_pool_weight), []
                         learned = self.filter.update(pooled)    # {} where the critic had no evidence
                         tally.record(learned)
-                        weigh = cfg.low_goal_weight
-                        if weigh != "uniform" and (learned or (weigh == "prior_marginal"
-                                                               and self.low.goal_weight is None)):
-                            floor = 1.0 - cfg.filter_end
-                            self.low.goal_weight = torch.as_tensor(
-                                np.maximum(self.filter.marginals(), floor), dtype=torch.float32)
+                        self._weigh_low_level(bool(learned))
         if train:
             self.filter.end_episode(visited, tally.success)
             self._recent.append(bool(tally.success))
@@ -320,6 +315,15 @@ class HRLLoop:
             if self._break_cycles:
                 tally.put("low/revisits", float(revisits))
         return tally.stats(self.env_steps, options, explore_eps=explore, filter_eps=filter_eps, chosen=chosen)
+
+    def _weigh_low_level(self, learned: bool) -> None:
+        """``low_goal_weight``: after a critic update from evidence (or, with "prior_marginal", at the
+        first update call), the low level weighs sub-goal g by max(P(w_g = 1), 1 - filter_end)."""
+        mode = self.cfg.low_goal_weight
+        if mode == "uniform" or not (learned or (mode == "prior_marginal" and self.low.goal_weight is None)):
+            return
+        weights = np.maximum(self.filter.marginals(), 1.0 - self.cfg.filter_end)
+        self.low.goal_weight = torch.as_tensor(weights, dtype=torch.float32)
 
     def _cap_by_success(self, explore: float, low_explore: float) -> tuple[float, float]:
         """The two ε's under ``explore_by_success``: at most max(end, 1 - recent success rate)."""
@@ -329,7 +333,7 @@ class HRLLoop:
         if self.cfg.success_rate_over == "played":
             failing = 1.0 - sum(self._recent) / (len(self._recent) + 1.0)
         else:
-            failing = 1.0 - sum(self._recent) / max(self.cfg.outcome_window, 1)
+            failing = 1.0 - sum(self._recent) / self.cfg.outcome_window     # validated positive
         explore = min(explore, max(self.cfg.explore_end, failing))
         if mode == "both":
             low_explore = min(low_explore, max(self.cfg.low_explore_end, failing))
