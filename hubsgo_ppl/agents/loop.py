@@ -95,7 +95,8 @@ class LoopConfig:
     # success, a first success lowers ε at once, and failures after it raise ε again
     success_rate_over: str = "window"
     # "uniform": the learned low level's TD loss weighs every sub-goal alike (h-DQN's all-goal
-    # relabelling); "marginal" (HUBS-GO, a learned grid low level): after each critic update from
+    # relabelling); "marginal" (the MiniGrid default; acts with a critic and the learned grid low
+    # level, and is "uniform" without them): after each critic update from
     # evidence (an outcome critic: from the first success on) a sub-goal weighs its marginal
     # P(w_g = 1), at least 1 - filter_end (the share of choices that still read G0), so the low
     # level's capacity goes to the sub-goals the critic has learned to believe in; "prior_marginal":
@@ -172,10 +173,10 @@ class HRLLoop:
         self.success_rate = np.zeros(len(self.names))   # per-goal moving average of option success
         self._recent: deque[bool] = deque(maxlen=config.outcome_window)  # success of recent training episodes
         self._pending: list = []                # high-level minibatches waiting for the next critic update
-        weighable = isinstance(low, GoalDQN) and isinstance(subgoal_filter, CriticFilter)
-        if config.low_goal_weight != "uniform" and not weighable:
-            raise ValueError(f"loop.low_goal_weight={config.low_goal_weight} needs a critic (agent hubsgo) and a "
-                             "learned grid low level (GoalDQN); use loop.low_goal_weight=uniform")
+        # the weights need a critic to read and a low level that takes them (GoalDQN); without either
+        # (h-DQN, a scripted or continuous low level) every sub-goal weighs alike, as with "uniform"
+        self._weighs_low = (config.low_goal_weight != "uniform" and isinstance(low, GoalDQN)
+                            and isinstance(subgoal_filter, CriticFilter))
         self._ghat: np.ndarray | None = None    # Ĝt as the loop sees it (refreshed per option or per episode)
         self._ghat_given: np.ndarray | None = None   # the achieved set Ĝt was last read with
         self._break_cycles = (config.low_break_cycles and low.learns
@@ -320,7 +321,7 @@ class HRLLoop:
         """``low_goal_weight``: after a critic update from evidence (or, with "prior_marginal", at the
         first update call), the low level weighs sub-goal g by max(P(w_g = 1), 1 - filter_end)."""
         mode = self.cfg.low_goal_weight
-        if mode == "uniform" or not (learned or (mode == "prior_marginal" and self.low.goal_weight is None)):
+        if not self._weighs_low or not (learned or (mode == "prior_marginal" and self.low.goal_weight is None)):
             return
         weights = np.maximum(self.filter.marginals(), 1.0 - self.cfg.filter_end)
         self.low.goal_weight = torch.as_tensor(weights, dtype=torch.float32)

@@ -19,11 +19,13 @@ PRESETS: dict[str, dict[str, Any]] = {
         "env": {},                      # keyword arguments of the env, e.g. max_steps
         # the high level reads Ĝt given what the agent holds and has opened, once per episode until
         # that changes; before the critic's first update Ĝt is the prior's completion of what was
-        # achieved; the critic is updated on every 4th high-level minibatch (the pool at weight 1/4)
+        # achieved; the critic is updated on every 4th high-level minibatch (the pool at weight 1/4);
+        # after each update from evidence the learned low level's TD loss weighs each sub-goal by its
+        # marginal, at least 1 - filter_end (h-DQN, without a critic: all alike)
         "loop": {"option_steps": 10, "explore_fraction": 0.3, "low_explore_fraction": 0.3,
                  "filter_start": 0.5, "filter_end": 0.9, "filter_fraction": 0.3,
                  "filter_given_achieved": True, "filter_refresh": "episode", "filter_before_update": "completion",
-                 "critic_every": 4},
+                 "critic_every": 4, "low_goal_weight": "marginal"},
         "high": {"hidden": [128, 128], "lr": 1e-3, "batch_size": 64},
         # potential-based shaping towards each sub-goal's cell (optimal policies unchanged)
         "low": {"hidden": [128, 128], "lr": 5e-4, "batch_size": 128, "learning_starts": 1000, "shaping": 1.0},
