@@ -93,7 +93,7 @@ def main() -> None:
     p.add_argument("--seeds", type=int, nargs="+", default=[0], help="seeds; steps and time are summed")
     p.add_argument("--set", action="append", default=[], help="hyperparameter override, as for hubsgo train")
     p.add_argument("--hubsgo-set", action="append", default=[],
-                   help="an override for the HUBS-GO run only (a setting h-DQN lacks, e.g. loop.low_goal_weight=marginal)")
+                   help="an override for the HUBS-GO run only (e.g. loop.low_goal_weight=uniform)")
     p.add_argument("--strict", action="store_true", help="also run hubsgo with loop.critic_every=1")
     args = p.parse_args()
     torch.set_num_threads(1)

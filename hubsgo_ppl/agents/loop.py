@@ -96,11 +96,11 @@ class LoopConfig:
     success_rate_over: str = "window"
     # "uniform": the learned low level's TD loss weighs every sub-goal alike (h-DQN's all-goal
     # relabelling); "marginal" (the MiniGrid default; acts with a critic and the learned grid low
-    # level, and is "uniform" without them): after each critic update from
-    # evidence (an outcome critic: from the first success on) a sub-goal weighs its marginal
-    # P(w_g = 1), at least 1 - filter_end (the share of choices that still read G0), so the low
-    # level's capacity goes to the sub-goals the critic has learned to believe in; "prior_marginal":
-    # the same, and before that the prior's marginals, read once at the critic's first update call
+    # level, and is "uniform" without them): after each critic update from evidence (an outcome
+    # critic: from the first success on) a sub-goal weighs its marginal P(w_g = 1), at least
+    # 1 - filter_end (the share of choices that still read G0), so the low level's capacity goes to
+    # the sub-goals the critic has learned to believe in; "prior_marginal": the same, and before that
+    # the prior's marginals, read once at the critic's first update call
     low_goal_weight: str = "uniform"
     critic_every: int = 1                       # high-level updates pooled into one critic update
     # how a pool of K minibatches weighs in the likelihood (Eq. 4): "mean" (weight 1/K: an update aims
@@ -320,11 +320,10 @@ class HRLLoop:
     def _weigh_low_level(self, learned: bool) -> None:
         """``low_goal_weight``: after a critic update from evidence (or, with "prior_marginal", at the
         first update call), the low level weighs sub-goal g by max(P(w_g = 1), 1 - filter_end)."""
-        mode = self.cfg.low_goal_weight
-        if not self._weighs_low or not (learned or (mode == "prior_marginal" and self.low.goal_weight is None)):
-            return
-        weights = np.maximum(self.filter.marginals(), 1.0 - self.cfg.filter_end)
-        self.low.goal_weight = torch.as_tensor(weights, dtype=torch.float32)
+        first_call = self.cfg.low_goal_weight == "prior_marginal" and self.low.goal_weight is None
+        if self._weighs_low and (learned or first_call):
+            weights = np.maximum(self.filter.marginals(), 1.0 - self.cfg.filter_end)
+            self.low.goal_weight = torch.as_tensor(weights, dtype=torch.float32)
 
     def _cap_by_success(self, explore: float, low_explore: float) -> tuple[float, float]:
         """The two ε's under ``explore_by_success``: at most max(end, 1 - recent success rate)."""
