@@ -14,7 +14,10 @@ high-level ε at the first success, and for HUBS-GO the mean size of Ĝt there (
 the safeguard's additions, ``critic/set_size`` + ``critic/kept`` of ``metrics.csv``), the options per
 episode, and the low level's cycle-breaking random steps per option (``low/revisits`` over ``options``).
 
-    python scripts/critic_report.py runs/sweeps/critic [--tasks keydoor threepair ...] [--no-eval] [--after-first]
+``--seeds`` restricts every table to those seeds (a table measured on seeds 0-4 of a sweep that now
+runs more).
+
+    python scripts/critic_report.py runs/sweeps/critic [--tasks keydoor threepair ...] [--seeds 0 1 2 3 4] [--no-eval] [--after-first]
 """
 
 from __future__ import annotations
@@ -103,6 +106,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("sweep_dir")
     ap.add_argument("--tasks", nargs="*")
+    ap.add_argument("--seeds", nargs="*", type=int, help="only these seeds (default: every seed found)")
     ap.add_argument("--no-eval", action="store_true")
     ap.add_argument("--after-first", action="store_true", help="also the stretch from the first success to 90%%")
     args = ap.parse_args()
@@ -113,6 +117,8 @@ def main() -> None:
             continue
         for var_dir in sorted(p for p in task_dir.iterdir() if p.is_dir()):
             for run in sorted(var_dir.glob("seed*")):
+                if args.seeds is not None and run.name.removeprefix("seed") not in {str(k) for k in args.seeds}:
+                    continue
                 if not (run / "subgoals.json").exists() and var_dir.name.startswith("hubsgo"):
                     continue
                 m = pd.read_csv(run / "metrics.csv")

@@ -48,3 +48,21 @@ def test_stretch_without_a_critic_has_no_ghat_size():
     # episodes 1..20 first hold 18 successes: the stretch is episodes 3..20
     out = critic_report._stretch(_log([0] * 3 + [1] * 25, hubsgo=False))
     assert out["stretch_episodes"] == 20 - 3 and math.isnan(out["stretch_ghat"])
+
+
+def test_seeds_restricts_the_table_to_the_seeds_named(tmp_path, monkeypatch, capsys):
+    # three h-DQN seeds whose logs reach 90% success at different steps; --seeds 0 2 averages seeds 0 and 2
+    for seed, first in ((0, 2), (1, 10), (2, 4)):
+        run = tmp_path / "keydoor" / "hdqn" / f"seed{seed}"
+        run.mkdir(parents=True)
+        m = _log([0] * first + [1] * 25, hubsgo=False)
+        m["env_steps"] = [100 * (i + 1) for i in range(len(m))]
+        m["return"], m["wall_time"] = m["success"] * 0.9, 1.0
+        m.to_csv(run / "metrics.csv", index=False)
+        (run / "learning_curve.png").write_bytes(b"")
+    monkeypatch.setattr(sys, "argv", ["critic_report.py", str(tmp_path), "--seeds", "0", "2", "--no-eval"])
+    critic_report.main()
+    row = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("| keydoor | hdqn"))
+    cells = [c.strip() for c in row.split("|")]
+    # the first window of 20 episodes with 18 successes ends at episode 19 (seed 0) and 21 (seed 2)
+    assert cells[3] == "2" and cells[5].startswith("2,100 ± 100")
