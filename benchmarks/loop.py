@@ -15,7 +15,9 @@ The two agents do not run the same episodes (h-DQN may still be wandering where 
 short options), so the side-by-side ratio mixes the critic's cost with behaviour. The script therefore
 also times the critic's own updates inside the HUBS-GO run and reports the like-for-like ratio
 ``wall / (wall - critic time)``: what the same trajectory would cost without the critic. ``--seeds``
-sums steps and wall time over several seeds.
+sums steps and wall time over several seeds. The runs are interleaved by seed in alternating order
+(h-DQN then HUBS-GO for the first seed, HUBS-GO then h-DQN for the second, ...), so that a drift in the
+machine's speed during the measurement falls on both agents alike; each seed's own ratio is printed too.
 """
 
 from __future__ import annotations
@@ -71,19 +73,30 @@ class CriticTimer:
         CriticFilter.update = self._orig
 
 
-def agent_run(task: str, agent: str, steps: int, seeds: list[int], overrides: list[str]) -> tuple[int, float, float]:
-    """(env steps, wall seconds, seconds inside critic updates), summed over ``seeds``."""
+def agent_run(task: str, agent: str, steps: int, seed: int, overrides: list[str]) -> tuple[int, float, float]:
+    """(env steps, wall seconds, seconds inside critic updates) of one training run."""
     from hubsgo_ppl.experiments.run import RunConfig, train
 
-    total, wall = 0, 0.0
     with CriticTimer() as timer, tempfile.TemporaryDirectory() as out:
-        for seed in seeds:
-            t0 = time.perf_counter()
-            summary = train(RunConfig(task=task, agent=agent, steps=steps, seed=seed, overrides=overrides),
-                            f"{out}/run{seed}", progress=False)
-            wall += time.perf_counter() - t0
-            total += int(summary["env_steps"])
-    return total, wall, timer.seconds
+        t0 = time.perf_counter()
+        summary = train(RunConfig(task=task, agent=agent, steps=steps, seed=seed, overrides=overrides),
+                        f"{out}/run{seed}", progress=False)
+        wall = time.perf_counter() - t0
+    return int(summary["env_steps"]), wall, timer.seconds
+
+
+def interleaved(task: str, steps: int, seeds: list[int], overrides: dict[str, list[str]]) -> dict[str, list]:
+    """Per agent, the (env steps, wall, critic seconds) of each seed, the agents alternating in order."""
+    agents = list(overrides)
+    out: dict[str, list] = {a: [] for a in agents}
+    for i, seed in enumerate(seeds):
+        for agent in (agents if i % 2 == 0 else agents[::-1]):
+            out[agent].append(agent_run(task, agent, steps, seed, overrides[agent]))
+    return out
+
+
+def _sum(runs: list) -> tuple[int, float, float]:
+    return sum(r[0] for r in runs), sum(r[1] for r in runs), sum(r[2] for r in runs)
 
 
 def main() -> None:
@@ -98,8 +111,9 @@ def main() -> None:
     args = p.parse_args()
     torch.set_num_threads(1)
     raw = raw_env_rate(args.task, args.steps, args.seeds[0])
-    h_steps, h_wall, _ = agent_run(args.task, "hdqn", args.steps, args.seeds, args.set)
-    g_steps, g_wall, g_critic = agent_run(args.task, "hubsgo", args.steps, args.seeds, args.set + args.hubsgo_set)
+    runs = interleaved(args.task, args.steps, args.seeds,
+                       {"hdqn": args.set, "hubsgo": args.set + args.hubsgo_set})
+    (h_steps, h_wall, _), (g_steps, g_wall, g_critic) = _sum(runs["hdqn"]), _sum(runs["hubsgo"])
     hdqn, hubsgo = h_steps / h_wall, g_steps / g_wall
     print(f"task {args.task}, {args.steps} env steps x seeds {args.seeds}, torch threads 1")
     print(f"{'what':<28}{'steps/s':>10}")
@@ -107,11 +121,14 @@ def main() -> None:
     print(f"{'hdqn loop':<28}{hdqn:>10.0f}")
     print(f"{'hubsgo loop (critic)':<28}{hubsgo:>10.0f}   critic updates {g_critic:.1f} s of {g_wall:.1f} s")
     if args.strict:
-        s_steps, s_wall, s_critic = agent_run(args.task, "hubsgo", args.steps, args.seeds,
-                                              args.set + args.hubsgo_set + ["loop.critic_every=1"])
+        s_steps, s_wall, s_critic = _sum([agent_run(args.task, "hubsgo", args.steps, seed,
+                                                    args.set + args.hubsgo_set + ["loop.critic_every=1"])
+                                          for seed in args.seeds])
         strict = s_steps / s_wall
         print(f"{'hubsgo, critic_every=1':<28}{strict:>10.0f}   ratio hdqn/hubsgo {hdqn / strict:.2f}, "
               f"like-for-like {s_wall / (s_wall - s_critic):.2f}")
+    for seed, h, g in zip(args.seeds, runs["hdqn"], runs["hubsgo"]):
+        print(f"{f'  seed {seed}':<28}hdqn/hubsgo {(h[0] / h[1]) / (g[0] / g[1]):.2f} side by side")
     print(f"critic overhead ratio hdqn/hubsgo = {hdqn / hubsgo:.2f} side by side, "
           f"{g_wall / (g_wall - g_critic):.2f} like-for-like (same trajectory without the critic) "
           f"(target <= 1.15); loop cost vs raw env: hdqn {raw / hdqn:.1f}x, hubsgo {raw / hubsgo:.1f}x")
