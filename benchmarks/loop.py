@@ -96,7 +96,8 @@ def interleaved(task: str, steps: int, seeds: list[int], overrides: dict[str, li
 
 
 def _sum(runs: list) -> tuple[int, float, float]:
-    return sum(r[0] for r in runs), sum(r[1] for r in runs), sum(r[2] for r in runs)
+    """Steps, wall and critic seconds summed over runs."""
+    return tuple(map(sum, zip(*runs)))
 
 
 def main() -> None:

@@ -111,13 +111,14 @@ def main() -> None:
     ap.add_argument("--after-first", action="store_true", help="also the stretch from the first success to 90%%")
     args = ap.parse_args()
     root = Path(args.sweep_dir)
+    wanted = None if args.seeds is None else {f"seed{k}" for k in args.seeds}
     rows = []
     for task_dir in sorted(p for p in root.iterdir() if p.is_dir()):
         if args.tasks and task_dir.name not in args.tasks:
             continue
         for var_dir in sorted(p for p in task_dir.iterdir() if p.is_dir()):
             for run in sorted(var_dir.glob("seed*")):
-                if args.seeds is not None and run.name.removeprefix("seed") not in {str(k) for k in args.seeds}:
+                if wanted is not None and run.name not in wanted:
                     continue
                 if not (run / "subgoals.json").exists() and var_dir.name.startswith("hubsgo"):
                     continue
