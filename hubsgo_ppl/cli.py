@@ -1,7 +1,7 @@
 """``hubsgo``: train, evaluate and inspect HUBS-GO runs.
 
     hubsgo train TASK [--agent hubsgo|hdqn|ddqn|...] [--model SPEC] [--steps N] [--seed S] [--out DIR] [--resume]
-                      [--stop-at STEP] [--init-from RUN [--transfer critic,high,low]]
+                      [--stop-at STEP] [--init-from RUN [--transfer critic,high,low] [--restart-schedules]]
     hubsgo revise RUN_DIR --model NEW_SPEC [--steps TOTAL] [--stop-at STEP] [--no-train]
     hubsgo evaluate RUN_DIR [--episodes K]
     hubsgo subgoals RUN_DIR
@@ -45,13 +45,15 @@ def cmd_train(args: argparse.Namespace) -> int:
     from .experiments.run import RunConfig, train
 
     out = Path(args.out) if args.out else Path("runs") / f"{args.task}-{args.agent}-s{args.seed}"
-    if args.transfer is not None and args.init_from is None:
+    if (args.transfer is not None or args.restart_schedules) and args.init_from is None:
         from .experiments.run import RunError
 
-        raise RunError("--transfer names what to take from the run given by --init-from; add --init-from RUN")
+        flag = "--transfer names what to take" if args.transfer is not None else "--restart-schedules is about what is taken"
+        raise RunError(f"{flag} from the run given by --init-from; add --init-from RUN")
     cfg = RunConfig(task=args.task, agent=args.agent, model=args.model, graph=args.graph, steps=args.steps,
                     seed=args.seed, low_level=args.low_level, overrides=args.set or [], init_from=args.init_from,
-                    transfer=args.transfer.split(",") if args.transfer is not None else None)
+                    transfer=args.transfer.split(",") if args.transfer is not None else None,
+                    restart_schedules=args.restart_schedules)
     summary = train(cfg, out, resume=args.resume, progress=not args.no_progress, stop_at=args.stop_at)
     _print_summary(summary, out)
     return 0
@@ -67,8 +69,11 @@ def _fmt_transfer(init: dict[str, Any]) -> str:
             parts.append(f"critic ({m['subgoals']} sub-goals, {m['edges']} edges by name)")
         else:
             parts.append(f"{words} ({next(iter(m.values()))} {next(iter(m))} by name)")
-    return (f"initialised from {init['run']} ({init['agent']} on {init['task']}, {init['env_steps']:,} env steps): "
+    text = (f"initialised from {init['run']} ({init['agent']} on {init['task']}, {init['env_steps']:,} env steps): "
             + ", ".join(parts))
+    if init.get("schedules"):
+        text += "; schedules continued: " + ", ".join(f"loop.{k}={v:g}" for k, v in init["schedules"].items())
+    return text
 
 
 def _print_summary(summary: dict[str, Any], out: Path) -> None:
@@ -272,6 +277,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="start from this run's critic, high level and low level, sub-goals matched by name")
     t.add_argument("--transfer", metavar="PARTS",
                    help="with --init-from: which parts, comma-separated from critic,high,low (default: all that apply)")
+    t.add_argument("--restart-schedules", action="store_true",
+                   help="with --init-from: start the transferred parts' exploration schedules afresh (default: "
+                        "where the source run left them)")
     t.add_argument("--no-progress", action="store_true", help="no progress bar")
     t.set_defaults(func=cmd_train)
 

@@ -8,7 +8,9 @@ one per arm:
 
 - ``scratch``: no transfer;
 - ``critic``, ``high``, ``low``: that part alone (``--transfer critic`` ...);
-- ``all``: critic, high level and low level together.
+- ``all``: critic, high level and low level together;
+- ``all_restarted``: the same with ``--restart-schedules`` (the exploration schedules start afresh
+  instead of where the source run left them).
 
 Per arm it reports, as mean ± standard error over the seeds, the env steps until the rolling success
 rate (20 episodes) first reaches 90% (runs that never reach it are counted, not averaged) and the
@@ -31,7 +33,9 @@ from measure_common import SMOKE, WINDOW, finish, parser, run_jobs, output_dir, 
 
 ROOT = Path(__file__).resolve().parents[1]
 PAIRS = {"keydoor": "keydoor_moved", "fourroom": "fourroom_moved", "threepair": "threepair_moved"}
-ARMS = {"scratch": None, "critic": ["critic"], "high": ["high"], "low": ["low"], "all": ["critic", "high", "low"]}
+ARMS = {"scratch": None, "critic": ["critic"], "high": ["high"], "low": ["low"], "all": ["critic", "high", "low"],
+        "all_restarted": ["critic", "high", "low"]}
+RESTARTED = {"all_restarted"}
 
 
 def one(source: str, seed: int, out: Path, steps: int | None, overrides: list[str]) -> list[dict]:
@@ -62,7 +66,8 @@ def one(source: str, seed: int, out: Path, steps: int | None, overrides: list[st
     for arm, parts in ARMS.items():
         run = base / arm
         ensure(run, RunConfig(task=target, seed=seed, steps=steps, overrides=overrides,
-                              init_from=None if parts is None else str(src), transfer=parts))
+                              init_from=None if parts is None else str(src), transfer=parts,
+                              restart_schedules=arm in RESTARTED))
         metrics = read_csv_rows(run / "metrics.csv")
         last = metrics[-WINDOW:]
         rows.append({"source": source, "target": target, "seed": seed, "arm": arm, "episodes": len(metrics),

@@ -44,6 +44,9 @@ class Catalogue(StrictModel):
     options: dict[str, Any] = Field(default_factory=dict)
     subgoals: list[SubgoalDef]
     source: str = Field(default="<catalogue>", exclude=True)
+    # the whole catalogue's sub-goals when this one is a subset of it (``envs.subset``); an egocentric
+    # maze observation measures its offsets to these, so dropping sub-goals leaves its shape alone
+    observed: list[SubgoalDef] | None = Field(default=None, exclude=True)
 
     @field_validator("subgoals")
     @classmethod

@@ -59,7 +59,8 @@ def subset_catalogue(catalogue: Catalogue, names: Sequence[str]) -> Catalogue:
     if list(names) == catalogue.names:
         return catalogue
     keep = set(names)
-    sub = catalogue.model_copy(update={"subgoals": [sg for sg in catalogue.subgoals if sg.name in keep]})
+    sub = catalogue.model_copy(update={"subgoals": [sg for sg in catalogue.subgoals if sg.name in keep],
+                                       "observed": catalogue.observed or list(catalogue.subgoals)})
     sub.source = catalogue.source           # layouts are named relative to the catalogue's file
     return sub
 

@@ -90,6 +90,8 @@ class RunConfig:
     overrides: list[str] = field(default_factory=list)
     init_from: str | None = None      # a run directory whose critic / high level / low level start this run
     transfer: list[str] | None = None  # which of them ("critic", "high", "low"); default: all that apply
+    # with init_from: start the transferred parts' schedules afresh instead of where the source left them
+    restart_schedules: bool = False
 
 
 def _critic_from_config(resolved: dict[str, Any]) -> Any:
@@ -270,6 +272,13 @@ def _start(cfg: RunConfig, out: Path, resume: bool):
             plan = plan_transfer(resolved, cfg.init_from, cfg.transfer)
         except TransferError as exc:
             raise RunError(str(exc)) from None
+        schedules = {}
+        if not cfg.restart_schedules:
+            from .transfer import continued_schedules
+
+            user_set = {o.split("=", 1)[0].strip().removeprefix("loop.") for o in cfg.overrides}
+            schedules = continued_schedules(plan, keep=user_set)
+            resolved["hyper"].setdefault("loop", {}).update(schedules)
     created = not out.exists()
     _check_writable(out)
     removed = _tidy(out, RUN_FILES)
@@ -295,7 +304,7 @@ def _start(cfg: RunConfig, out: Path, resume: bool):
             from .transfer import TransferError, apply_transfer
 
             try:
-                resolved["init_from"] = apply_transfer(agent, plan)
+                resolved["init_from"] = {**apply_transfer(agent, plan), "schedules": schedules}
             except TransferError as exc:
                 raise RunError(str(exc)) from None
         write_yaml(out / "config.yaml", resolved)

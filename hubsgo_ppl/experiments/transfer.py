@@ -7,7 +7,10 @@ Two commands use it:
   (:func:`revise_agent_state`);
 - ``hubsgo train NEW_TASK --init-from RUN [--transfer critic,high,low]``: a new run starts from
   another run's critic, high level and/or low level (:func:`plan_transfer`, :func:`apply_transfer`);
-  its optimisers, replay buffers, counters and schedules start afresh.
+  its optimisers, replay buffers and counters start afresh. Each transferred part brings its schedule
+  along (:data:`SCHEDULES`, :func:`continued_schedules`): the high level's ε, the low level's ε and,
+  with the critic, the probability of choosing from Ĝt start where the source run left them, so that a
+  policy trained once is not made to act at random again; ``--restart-schedules`` starts them afresh.
 
 The remapping rules are in :mod:`.remap`. A transfer (``--init-from``) takes only the networks and the critic's factors; its Ĝt is the
 transferred critic's from the first episode on (not only after the first critic update, which with
@@ -28,12 +31,17 @@ from .io import CheckpointError, load_checkpoint
 from .remap import (TransferError, name_index, remap_critic_state, remap_high_state, remap_low_state,  # noqa: F401
                     remap_rows, revise_agent_state)
 
-__all__ = ["PARTS", "TransferError", "TransferPlan", "name_index", "remap_rows", "remap_critic_state",
+__all__ = ["PARTS", "SCHEDULES", "TransferError", "TransferPlan", "name_index", "remap_rows", "remap_critic_state",
            "remap_high_state", "remap_low_state", "revise_agent_state", "plan_transfer", "apply_transfer",
+           "continued_schedules",
            "config_subgoals"]
 
 #: the parts of an agent ``--transfer`` names
 PARTS = ("critic", "high", "low")
+#: the loop's schedule (start, end, fraction keys) that each part brings along when transferred
+SCHEDULES = {"critic": ("filter_start", "filter_end", "filter_fraction"),
+             "high": ("explore_start", "explore_end", "explore_fraction"),
+             "low": ("low_explore_start", "low_explore_end", "low_explore_fraction")}
 _HIERARCHICAL = ("hubsgo", "hdqn")
 
 
@@ -55,11 +63,12 @@ def config_subgoals(config: dict[str, Any]) -> list[str]:
     return list(get_task(config["task_ref"]).catalogue.names)
 
 
-def _obs_and_actions(config: dict[str, Any]) -> tuple[tuple[int, ...], int | None]:
+def _obs_and_actions(config: dict[str, Any]) -> tuple[tuple[int, ...], int | None, str | None]:
     env = make_subset(config["task_ref"], config.get("subgoals"), **config["hyper"].get("env", {}))
     try:
         n = getattr(env.action_space, "n", None)
-        return tuple(int(d) for d in env.observation_space.shape), None if n is None else int(n)
+        return (tuple(int(d) for d in env.observation_space.shape), None if n is None else int(n),
+                getattr(env.unwrapped, "obs_mode", None))
     finally:
         env.close()
 
@@ -112,8 +121,12 @@ def plan_transfer(resolved: dict[str, Any], source: str | Path,
     if not chosen:
         raise TransferError(f"--init-from {src_dir}: nothing to transfer: {why['high']}")
     if "high" in chosen or "low" in chosen:
-        src_obs, src_n = _obs_and_actions(src)
-        dst_obs, dst_n = _obs_and_actions(resolved)
+        src_obs, src_n, src_mode = _obs_and_actions(src)
+        dst_obs, dst_n, dst_mode = _obs_and_actions(resolved)
+        if src_mode != dst_mode:
+            raise TransferError(
+                f"--init-from {src_dir}: observation modes differ: the source run observes {src_mode!r}, this one "
+                f"{dst_mode!r}; set --set env.obs_mode={src_mode} (or --transfer critic)")
         if src_obs != dst_obs:
             raise TransferError(
                 f"--init-from {src_dir}: observation shapes differ: {src['task']} has {src_obs}, {resolved['task']} "
@@ -131,6 +144,26 @@ def plan_transfer(resolved: dict[str, Any], source: str | Path,
     names = (list(ckpt["agent"]["filter"]["critic"]["names"]) if src["agent"] == "hubsgo"
              else config_subgoals(src))
     return TransferPlan(src_dir, chosen, src, ckpt["agent"], int(ckpt.get("env_steps", 0)), names)
+
+
+def continued_schedules(plan: TransferPlan, keep: Sequence[str] = ()) -> dict[str, float]:
+    """``{loop key: value}``: the start of each transferred part's schedule (:data:`SCHEDULES`) set to
+    the value the source run's schedule had reached at its last step; the keys in ``keep`` (those the
+    user set) are left out."""
+    from ..agents.config import make_config
+    from ..agents.loop import LoopConfig
+    from ..agents.schedules import LinearSchedule
+
+    hyper = plan.config["hyper"]
+    src = make_config("loop", LoopConfig, hyper.get("loop", {}), total_steps=int(hyper["steps"]))
+    progress = plan.env_steps / max(src.total_steps, 1)
+    out = {}
+    for part in plan.parts:
+        start, end, fraction = SCHEDULES[part]
+        if start not in keep:
+            value = LinearSchedule(getattr(src, start), getattr(src, end), getattr(src, fraction))(progress)
+            out[start] = round(float(value), 6)
+    return out
 
 
 def apply_transfer(agent: Any, plan: TransferPlan) -> dict[str, Any]:

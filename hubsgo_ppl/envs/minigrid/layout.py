@@ -32,7 +32,7 @@ Minigrid ``options`` (all validated, unknown keys rejected)::
     max_steps: 2000                       # default 4 * width * height
     start_dir: right                      # right | down | left | up | random (seeded by reset)
     actions: [left, right, forward, pickup, toggle]   # subset of MiniGrid's actions, in this order
-    obs_mode: symbolic                    # symbolic | image
+    obs_mode: symbolic                    # symbolic | image | egocentric
     mission: "reach the green goal"
 
 Sub-goal predicate kinds (``subgoals[i].kind`` with ``args``):
@@ -103,7 +103,7 @@ class MazeOptions(StrictModel):
     max_steps: int | None = Field(default=None, gt=0, description="truncation; default 4*W*H")
     start_dir: Literal["right", "down", "left", "up", "random"] = "right"
     actions: list[str] = Field(default_factory=lambda: ["left", "right", "forward", "pickup", "toggle"])
-    obs_mode: Literal["symbolic", "image"] = "symbolic"
+    obs_mode: Literal["symbolic", "image", "egocentric"] = "symbolic"
     mission: str = "reach the goal"
 
     @field_validator("legend")
@@ -204,6 +204,9 @@ class MazeSpec:
     predicates: tuple[Predicate, ...]
     max_steps: int
     carry_kinds: tuple[tuple[str, str], ...]   # distinct (type, colour) of carriables, for the obs
+    # the whole catalogue's predicates (``predicates`` unless the catalogue is a subset of another):
+    # the landmarks an egocentric observation measures its offsets to
+    landmarks: tuple[Predicate, ...] = ()
 
     @property
     def source(self) -> str:
@@ -393,8 +396,10 @@ def _build(cat: Catalogue) -> MazeSpec:
     carry_kinds = tuple(dict.fromkeys((o.type, o.color) for o in lay.carriables))
     preds = tuple(_compile_predicate(i, sg, lay, carry_kinds, source, path.name)
                   for i, sg in enumerate(cat.subgoals))
+    landmarks = preds if cat.observed is None else tuple(
+        _compile_predicate(i, sg, lay, carry_kinds, source, path.name) for i, sg in enumerate(cat.observed))
     max_steps = opts.max_steps or 4 * lay.width * lay.height
-    return MazeSpec(cat, opts, lay, preds, max_steps, carry_kinds)
+    return MazeSpec(cat, opts, lay, preds, max_steps, carry_kinds, landmarks)
 
 
 @functools.lru_cache(maxsize=64)

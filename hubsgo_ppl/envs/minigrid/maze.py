@@ -34,6 +34,20 @@ and D the number of doors in reading order. ``obs_mode: image`` gives MiniGrid's
 (object, colour, state per cell, the agent's cell as (agent, red, direction)) flattened to
 ``W*H*3`` floats in [0, 255].
 
+``obs_mode: egocentric`` describes the maze as the agent sees it, with no absolute position or
+heading, so that what a policy learns on one layout applies to the same task with its walls and
+objects moved or turned (``hubsgo train --init-from``)::
+
+    [carrying anything (1) | achieved (L) | offset (2L) | window (2 * 7 * 7)]
+
+over the catalogue's L sub-goals (all of them, even when a critic spec keeps only some, so that a
+revision keeps the observation's shape): whether each holds, and the offset from the agent to its
+target (``subgoal_target``) in the agent's frame, (ahead, to the right) over ``max(W, H)``. The
+window is the 7x7 cells around the agent, turned so that the agent faces up it: channel 0 is 1 where
+the agent cannot step (a wall, a closed door, a key or ball on the floor, outside the grid), channel 1
+where there is lava. Floats in [-1, 1]. Two tasks' observations mean the same when their catalogues
+list the same sub-goals in the same order.
+
 ## Rewards
 
 Sparse, as in the paper (Sec. 4): MiniGrid's ``1 - 0.9 * (step_count / max_steps)`` on reaching the
@@ -88,6 +102,24 @@ __all__ = ["MazeEnv"]
 
 _KIND_CODE = {"at": 0, "goal": 0, "carrying": 1, "door_open": 2}
 
+#: the egocentric window's side, in cells (the agent in its centre)
+_VIEW = 7
+#: MiniGrid's direction -> the unit step forward (0 right, 1 down, 2 left, 3 up; y grows downwards)
+_FORWARD = ((1, 0), (0, 1), (-1, 0), (0, -1))
+
+
+def _window_offsets(direction: int) -> tuple[np.ndarray, np.ndarray]:
+    """World (dx, dy) of each window cell, row by row from the farthest ahead, left to right as the
+    agent facing ``direction`` sees them; so every heading gives the same window for the same view."""
+    fx, fy = _FORWARD[direction]
+    rx, ry = -fy, fx                                  # the agent's right
+    r = _VIEW // 2
+    ahead, right = np.meshgrid(np.arange(r, -r - 1, -1), np.arange(-r, r + 1), indexing="ij")
+    return (ahead * fx + right * rx).reshape(-1), (ahead * fy + right * ry).reshape(-1)
+
+
+_WINDOW = tuple(_window_offsets(d) for d in range(4))
+
 
 class MazeEnv(MiniGridEnv):
     """A MiniGrid maze declared by a catalogue YAML + ASCII layout (see the module docstring).
@@ -103,8 +135,9 @@ class MazeEnv(MiniGridEnv):
     def __init__(self, catalogue: str | Path | Catalogue, obs_mode: str | None = None,
                  max_steps: int | None = None, render_mode: str | None = None, **kwargs: Any):
         spec = load_maze_spec(catalogue)
-        if obs_mode is not None and obs_mode not in ("symbolic", "image"):
-            raise SpecError(f"{spec.source}: obs_mode={obs_mode!r} is not supported; use 'symbolic' or 'image'")
+        if obs_mode is not None and obs_mode not in ("symbolic", "image", "egocentric"):
+            raise SpecError(f"{spec.source}: obs_mode={obs_mode!r} is not supported; use 'symbolic', 'image' "
+                            f"or 'egocentric'")
         if max_steps is not None and (not isinstance(max_steps, int) or max_steps <= 0):
             raise SpecError(f"{spec.source}: max_steps={max_steps!r} must be a positive int")
         self.spec_maze: MazeSpec = spec
@@ -127,10 +160,15 @@ class MazeEnv(MiniGridEnv):
         self._carry_index = {kind: j + 1 for j, kind in enumerate(spec.carry_kinds)}
         self._off_door = self._off_carry + 1 + len(spec.carry_kinds)
         self._obs_dim = self._off_door + len(lay.doors)
+        n_marks = len(spec.landmarks)
+        self._ego_dim = 1 + 3 * n_marks + 2 * _VIEW * _VIEW
         if self.obs_mode == "symbolic":
             self.observation_space = spaces.Box(0.0, 1.0, (self._obs_dim,), np.float32)
+        elif self.obs_mode == "egocentric":
+            self.observation_space = spaces.Box(-1.0, 1.0, (self._ego_dim,), np.float32)
         else:
             self.observation_space = spaces.Box(0.0, 255.0, (W * H * 3,), np.float32)
+        self._marks = tuple((_KIND_CODE[p.kind], p.target, p.index) for p in spec.landmarks)
 
         # (kind code, target, index) per sub-goal; tuples so the per-step test is a tight loop
         self._preds = tuple((_KIND_CODE[p.kind], p.target, p.index) for p in spec.predicates)
@@ -156,6 +194,16 @@ class MazeEnv(MiniGridEnv):
         if self.obs_mode == "image":
             # static cells never change, so encode them once per reset and patch the movable ones
             self._img_static = self.grid.encode()
+        if self.obs_mode == "egocentric":
+            # walls and lava never move: one padded map per reset, the doors and objects patched per step
+            pad = _VIEW // 2
+            self._static = np.ones((2, width + 2 * pad, height + 2 * pad), np.float32)
+            self._static[1] = 0.0
+            self._static[0, pad:pad + width, pad:pad + height] = 0.0
+            for x, y in lay.walls:
+                self._static[0, x + pad, y + pad] = 1.0
+            for x, y in lay.lava:
+                self._static[1, x + pad, y + pad] = 1.0
         self._doors, self._carriables = [], []
         for o in lay.objects:
             if o.type == "door":
@@ -172,7 +220,9 @@ class MazeEnv(MiniGridEnv):
         self.mission = self.spec_maze.options.mission
 
     def gen_obs(self) -> np.ndarray:
-        """The flat observation (replaces MiniGrid's egocentric view, which we never use)."""
+        """The flat observation (replaces MiniGrid's own egocentric view, which we never use)."""
+        if self.obs_mode == "egocentric":
+            return self._egocentric_obs()
         if self.obs_mode == "image":
             img = self._img_static.copy()
             for d in self._doors:
@@ -193,6 +243,32 @@ class MazeEnv(MiniGridEnv):
         for j, d in enumerate(self._doors):
             if d.is_open:
                 obs[self._off_door + j] = 1.0
+        return obs
+
+    def _egocentric_obs(self) -> np.ndarray:
+        n = len(self._marks)
+        obs = np.zeros(self._ego_dim, np.float32)
+        obs[0] = float(self.carrying is not None)
+        obs[1:1 + n] = self._achieved(self._marks)
+        ax, ay = self._agent_cell()
+        fx, fy = _FORWARD[self.agent_dir]
+        scale = float(max(self.width, self.height))
+        for i, pred in enumerate(self._marks):
+            tx, ty = self._target(pred)
+            dx, dy = tx - ax, ty - ay
+            # ahead = d . forward; right = d . (the forward vector turned clockwise on screen, y down)
+            obs[1 + n + 2 * i] = (dx * fx + dy * fy) / scale
+            obs[2 + n + 2 * i] = (-dx * fy + dy * fx) / scale
+        grid = self._static.copy()
+        pad = _VIEW // 2
+        for d in self._doors:
+            if not d.is_open:
+                grid[0, d.cur_pos[0] + pad, d.cur_pos[1] + pad] = 1.0
+        for obj in self._carriables:
+            if obj is not self.carrying and obj.cur_pos is not None and obj.cur_pos[0] >= 0:
+                grid[0, obj.cur_pos[0] + pad, obj.cur_pos[1] + pad] = 1.0
+        wx, wy = _WINDOW[self.agent_dir]
+        obs[1 + 3 * n:] = grid[:, wx + ax + pad, wy + ay + pad].reshape(-1)
         return obs
 
     # -- Gymnasium API ----------------------------------------------------------------------------
@@ -220,11 +296,14 @@ class MazeEnv(MiniGridEnv):
 
     def subgoal_achieved(self) -> np.ndarray:
         """Which catalogue predicates hold in the current state: bool array (N,)."""
-        out = np.zeros(len(self._preds), dtype=bool)
+        return self._achieved(self._preds)
+
+    def _achieved(self, preds: tuple) -> np.ndarray:
+        out = np.zeros(len(preds), dtype=bool)
         pos = self._agent_cell()
         c = self.carrying
         carried = 0 if c is None else self._carry_index[(c.type, c.color)]
-        for i, (code, target, idx) in enumerate(self._preds):
+        for i, (code, target, idx) in enumerate(preds):
             if code == 0:
                 out[i] = pos == target
             elif code == 1:
@@ -238,7 +317,10 @@ class MazeEnv(MiniGridEnv):
         if not 0 <= int(i) < len(self._preds):
             raise IndexError(f"sub-goal index {i} out of range; this task has {len(self._preds)}: "
                              f"{self.subgoal_names}")
-        code, target, idx = self._preds[int(i)]
+        return self._target(self._preds[int(i)])
+
+    def _target(self, pred: tuple) -> tuple[int, int]:
+        code, target, idx = pred
         if code == 1 and self._carriables:
             # a dropped key has moved; aim at where it lies now (or stay put while it is carried)
             kind = self.spec_maze.carry_kinds[idx]
@@ -252,11 +334,14 @@ class MazeEnv(MiniGridEnv):
 
     def subgoal_potential(self):
         """phi(obs) -> (B, N): minus the Manhattan distance from the agent's cell to each sub-goal's
-        catalogue target, over (width + height); read from symbolic observations (None for image ones).
+        catalogue target, over (width + height); read from symbolic or egocentric observations (None for
+        image ones).
 
         The low level may use it for potential-based shaping (Ng et al. 1999), which leaves its optimal
         policies unchanged; walls are not taken into account (the layout stays the learner's to discover).
         """
+        if self.obs_mode == "egocentric":
+            return self._egocentric_potential()
         if self.obs_mode != "symbolic":
             return None
         import torch
@@ -270,6 +355,21 @@ class MazeEnv(MiniGridEnv):
             y = obs[..., off_y:off_y + H].argmax(-1).float()
             d = (x[..., None] - targets[:, 0]).abs() + (y[..., None] - targets[:, 1]).abs()
             return -d / scale
+
+        return phi
+
+    def _egocentric_potential(self):
+        """phi for egocentric observations: the same Manhattan distance, read from the offsets (to
+        where each target is now: a carried key's is the agent's own cell)."""
+        import torch
+
+        marks = [p.name for p in self.spec_maze.landmarks]
+        n = len(marks)
+        cols = torch.tensor([1 + n + 2 * marks.index(name) for name in self.subgoal_names])
+        scale = float(max(self.width, self.height)) / float(self.width + self.height)
+
+        def phi(obs: "torch.Tensor") -> "torch.Tensor":
+            return -(obs[..., cols].abs() + obs[..., cols + 1].abs()) * scale
 
         return phi
 

@@ -23,7 +23,7 @@ def test_builtin_minigrid_tasks_present():
 
 
 @pytest.mark.parametrize("task", MINIGRID_TASKS)
-@pytest.mark.parametrize("obs_mode", ["symbolic", "image"])
+@pytest.mark.parametrize("obs_mode", ["symbolic", "image", "egocentric"])
 def test_check_env(task, obs_mode):
     register()
     env = gym.make(get_task(task).env_id, obs_mode=obs_mode)
@@ -132,7 +132,7 @@ def test_rewards_and_truncation():
 
 def test_bad_constructor_arguments():
     cat = get_task("keydoor").catalogue_path
-    with pytest.raises(SpecError, match="obs_mode='rgb'.*use 'symbolic' or 'image'"):
+    with pytest.raises(SpecError, match="obs_mode='rgb'.*use 'symbolic', 'image' or 'egocentric'"):
         MazeEnv(catalogue=cat, obs_mode="rgb")
     with pytest.raises(SpecError, match="max_steps=0 must be a positive int"):
         MazeEnv(catalogue=cat, max_steps=0)
