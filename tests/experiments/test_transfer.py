@@ -105,3 +105,55 @@ def test_the_critic_alone_transfers_by_name_to_a_larger_catalogue(sources, tmp_p
         else:                                   # a sub-goal keydoor lacks: the ising prior's field
             assert float(critic["theta"][j]) == -2.0, name
     assert yaml.safe_load((out / "config.yaml").read_text())["init_from"]["mapped"]["critic"]["subgoals"] == "5/9"
+
+
+def _loop(run):
+    """The run's loop settings, its config's over LoopConfig's defaults."""
+    from dataclasses import asdict
+
+    from hubsgo_ppl.agents.loop import LoopConfig
+
+    return {**asdict(LoopConfig()), **yaml.safe_load((run / "config.yaml").read_text())["hyper"]["loop"]}
+
+
+def test_transferred_parts_pick_up_their_schedules_where_the_source_left_them(tmp_path):
+    from hubsgo_ppl.agents.schedules import LinearSchedule
+
+    src = tmp_path / "src"      # paused a tenth of the way through its budget: every ε mid-decay
+    train(RunConfig(task="keydoor", steps=3000, seed=0, overrides=TINY), src, progress=False, stop_at=300)
+    at = load_checkpoint(src / "checkpoint.pt")["env_steps"] / 3000
+    s = _loop(src)
+
+    def left(key):              # the source schedule's value at its last step
+        return round(LinearSchedule(s[f"{key}_start"], s[f"{key}_end"], s[f"{key}_fraction"])(at), 6)
+
+    want = {"filter_start": left("filter"), "explore_start": left("explore"), "low_explore_start": left("low_explore")}
+    assert 0.5 < want["filter_start"] < 0.9 and 0.05 < want["explore_start"] < 1.0
+    runs = {"all": RunConfig(task="keydoor_moved", overrides=TINY, init_from=str(src)),
+            "low": RunConfig(task="keydoor_moved", overrides=TINY, init_from=str(src), transfer=["low"]),
+            "set": RunConfig(task="keydoor_moved", overrides=[*TINY, "loop.explore_start=0.7"], init_from=str(src)),
+            "restart": RunConfig(task="keydoor_moved", overrides=TINY, init_from=str(src), restart_schedules=True),
+            "scratch": RunConfig(task="keydoor_moved", overrides=TINY)}
+    for name, cfg in runs.items():
+        train(cfg, tmp_path / name, progress=False, max_episodes=0)
+    fresh = _loop(tmp_path / "scratch")
+    starts = {name: {k: _loop(tmp_path / name)[k] for k in want} for name in runs}
+    assert starts["all"] == want
+    assert yaml.safe_load((tmp_path / "all" / "config.yaml").read_text())["init_from"]["schedules"] == want
+    assert starts["low"] == {**{k: fresh[k] for k in want}, "low_explore_start": want["low_explore_start"]}
+    assert starts["set"] == {**want, "explore_start": 0.7}          # what the user sets wins
+    assert starts["restart"] == {k: fresh[k] for k in want}
+    assert fresh["explore_start"] == 1.0 and fresh["filter_start"] == 0.5
+
+
+def test_other_observation_modes_are_refused_in_one_line(sources, tmp_path, capsys):
+    out = tmp_path / "ego"
+    assert main(["train", "keydoor_moved", "--init-from", str(sources["keydoor"]), "--out", str(out),
+                 "--no-progress", "--set", "env.obs_mode=egocentric", *CLI_TINY]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["hubsgo: error: --init-from " + str(sources["keydoor"]) + ": observation modes differ: the source "
+                   "run observes 'symbolic', this one 'egocentric'; set --set env.obs_mode=symbolic (or --transfer "
+                   "critic)"]
+    assert not out.exists()
+    assert main(["train", "keydoor_moved", "--restart-schedules", "--out", str(out), "--no-progress"]) == 2
+    assert "add --init-from RUN" in capsys.readouterr().err
