@@ -17,7 +17,7 @@ rate (20 episodes) first reaches 90% (runs that never reach it are counted, not 
 success rate over the last 20 episodes. Everything goes under ``--out``: the runs, ``results.csv``
 (one row per target run) and ``summary.md``. Re-running skips finished runs.
 
-    .venv/bin/python scripts/measure_transfer.py --out runs/measure_transfer        # 3 pairs x 5 seeds x 5 arms
+    .venv/bin/python scripts/measure_transfer.py --out runs/measure_transfer        # 3 pairs x 5 seeds x 6 arms
     .venv/bin/python scripts/measure_transfer.py --out runs/smoke_transfer --smoke   # a pipeline check
 
 ``--smoke``: one seed, keydoor -> keydoor_moved only, 1,000 steps per run and tiny networks; it
@@ -38,8 +38,10 @@ ARMS = {"scratch": None, "critic": ["critic"], "high": ["high"], "low": ["low"],
 RESTARTED = {"all_restarted"}
 
 
-def one(source: str, seed: int, out: Path, steps: int | None, overrides: list[str]) -> list[dict]:
-    """The source run of one (pair, seed) and every target arm; one result row per arm."""
+def one(source: str, seed: int, out: Path, steps: int | None, overrides: list[str],
+        restart: bool = False, arms: tuple[str, ...] = tuple(ARMS)) -> list[dict]:
+    """The source run of one (pair, seed) and the target ``arms``; one result row per arm (``restart``:
+    every arm with its schedules started afresh, so ``all_restarted`` is left out)."""
     import torch
 
     from hubsgo_ppl.experiments.io import load_checkpoint
@@ -64,10 +66,12 @@ def one(source: str, seed: int, out: Path, steps: int | None, overrides: list[st
     ensure(src, RunConfig(task=source, seed=seed, steps=steps, overrides=overrides))
     rows = []
     for arm, parts in ARMS.items():
+        if (restart and arm in RESTARTED) or arm not in arms:
+            continue
         run = base / arm
         ensure(run, RunConfig(task=target, seed=seed, steps=steps, overrides=overrides,
                               init_from=None if parts is None else str(src), transfer=parts,
-                              restart_schedules=arm in RESTARTED))
+                              restart_schedules=restart or arm in RESTARTED))
         metrics = read_csv_rows(run / "metrics.csv")
         last = metrics[-WINDOW:]
         rows.append({"source": source, "target": target, "seed": seed, "arm": arm, "episodes": len(metrics),
@@ -85,12 +89,16 @@ def summarise(rows: list[dict], path: Path) -> str:
 def main(argv: list[str] | None = None) -> int:
     p = parser(__doc__, "one seed, keydoor -> keydoor_moved, 1,000 steps, tiny networks")
     p.add_argument("--sources", nargs="+", default=list(PAIRS), choices=list(PAIRS))
+    p.add_argument("--arms", nargs="+", default=list(ARMS), choices=list(ARMS), help="the target arms to run")
+    p.add_argument("--restart-schedules", action="store_true",
+                   help="every transfer arm starts its schedules afresh (`hubsgo train --restart-schedules`)")
     args = p.parse_args(argv)
     overrides: list[str] = list(args.overrides)
     if args.smoke:
         args.sources, args.seeds, args.steps, overrides = ["keydoor"], args.seeds[:1], 1_000, SMOKE + overrides
     out = output_dir(args.out)
-    jobs = [(s, seed, out, args.steps, overrides) for s in args.sources for seed in args.seeds]
+    jobs = [(s, seed, out, args.steps, overrides, args.restart_schedules, tuple(args.arms))
+            for s in args.sources for seed in args.seeds]
     return finish(run_jobs(one, jobs, args.workers), out, summarise)
 
 
