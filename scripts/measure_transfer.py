@@ -10,14 +10,15 @@ one per arm:
 - ``critic``, ``high``, ``low``: that part alone (``--transfer critic`` ...);
 - ``all``: critic, high level and low level together;
 - ``all_restarted``: the same with ``--restart-schedules`` (the exploration schedules start afresh
-  instead of where the source run left them).
+  instead of where the source run left them);
+- ``critic_low``: the critic and the low level, the high level learning afresh.
 
 Per arm it reports, as mean ± standard error over the seeds, the env steps until the rolling success
 rate (20 episodes) first reaches 90% (runs that never reach it are counted, not averaged) and the
 success rate over the last 20 episodes. Everything goes under ``--out``: the runs, ``results.csv``
 (one row per target run) and ``summary.md``. Re-running skips finished runs.
 
-    .venv/bin/python scripts/measure_transfer.py --out runs/measure_transfer        # 3 pairs x 5 seeds x 6 arms
+    .venv/bin/python scripts/measure_transfer.py --out runs/measure_transfer        # 3 pairs x 5 seeds x 7 arms
     .venv/bin/python scripts/measure_transfer.py --out runs/smoke_transfer --smoke   # a pipeline check
 
 ``--smoke``: one seed, keydoor -> keydoor_moved only, 1,000 steps per run and tiny networks; it
@@ -34,7 +35,7 @@ from measure_common import SMOKE, WINDOW, finish, parser, run_jobs, output_dir, 
 ROOT = Path(__file__).resolve().parents[1]
 PAIRS = {"keydoor": "keydoor_moved", "fourroom": "fourroom_moved", "threepair": "threepair_moved"}
 ARMS = {"scratch": None, "critic": ["critic"], "high": ["high"], "low": ["low"], "all": ["critic", "high", "low"],
-        "all_restarted": ["critic", "high", "low"]}
+        "all_restarted": ["critic", "high", "low"], "critic_low": ["critic", "low"]}
 RESTARTED = {"all_restarted"}
 
 
