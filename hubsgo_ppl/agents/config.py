@@ -32,7 +32,7 @@ import functools
 import inspect
 import types
 import typing
-from typing import Annotated, Any, Union
+from typing import Annotated, Any, Sequence, Union
 
 from pydantic import BeforeValidator, StrictBool, StrictFloat, StrictInt, StrictStr, ValidationError, create_model
 
@@ -242,6 +242,13 @@ def _check_item(item: str, base: dict[str, Any], hyper: dict[str, Any], models: 
         hyper[section][name] = model(**{name: value}).model_dump(mode="json", include={name})[name]
 
 
+def set_keys(overrides: Sequence[str], section: str) -> set[str]:
+    """The keys of ``section`` that the ``--set`` items ``overrides`` name (``loop.gamma=0.9`` -> gamma)."""
+    prefix = section + "."
+    return {key[len(prefix):] for key in (item.partition("=")[0].strip() for item in overrides)
+            if key.startswith(prefix)}
+
+
 def resolve_hyper(family: str, task: str | None, agent: str, overrides: list[str] = (), *,
                   steps: int | None = None, low_level: str | None = None) -> dict[str, Any]:
     """The run's settings: preset, task settings, ``steps``/``low_level`` and the ``--set`` overrides
@@ -257,8 +264,7 @@ def resolve_hyper(family: str, task: str | None, agent: str, overrides: list[str
     if hyper.get("low_level") != default_low and "low" in hyper:
         # the preset's low section is the family default low level's; another low level gets only what
         # --set gives it
-        given = {item.partition("=")[0].strip().split(".", 1)[1] for item in overrides
-                 if item.partition("=")[0].strip().startswith("low.")}
+        given = set_keys(overrides, "low")
         hyper["low"] = {k: v for k, v in hyper["low"].items() if k in given}
         base = {**base, "low": {k: v for k, v in base["low"].items() if k in given}}
     models = _models(agent, family, str(hyper.get("low_level", "learned")))

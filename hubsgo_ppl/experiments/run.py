@@ -274,10 +274,10 @@ def _start(cfg: RunConfig, out: Path, resume: bool):
             raise RunError(str(exc)) from None
         schedules = {}
         if not cfg.restart_schedules:
+            from ..agents.config import set_keys
             from .transfer import continued_schedules
 
-            user_set = {o.split("=", 1)[0].strip().removeprefix("loop.") for o in cfg.overrides}
-            schedules = continued_schedules(plan, keep=user_set)
+            schedules = continued_schedules(plan, keep=set_keys(cfg.overrides, "loop"))
             resolved["hyper"].setdefault("loop", {}).update(schedules)
     created = not out.exists()
     _check_writable(out)

@@ -29,8 +29,11 @@ def recorded(monkeypatch):
             for i in range(30):
                 w.writerow([i, 50 * (i + 1), 50, 1, 0.9])
 
+    def no_checkpoint(*args, **kwargs):
+        raise FileNotFoundError
+
     monkeypatch.setattr(run, "train", fake_train)
-    monkeypatch.setattr(io, "load_checkpoint", lambda *a, **k: (_ for _ in ()).throw(FileNotFoundError()))
+    monkeypatch.setattr(io, "load_checkpoint", no_checkpoint)
     return made
 
 

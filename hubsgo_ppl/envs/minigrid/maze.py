@@ -121,6 +121,10 @@ def _window_offsets(direction: int) -> tuple[np.ndarray, np.ndarray]:
 _WINDOW = tuple(_window_offsets(d) for d in range(4))
 
 
+def _compiled(predicates) -> tuple[tuple[int, tuple[int, int], int], ...]:
+    return tuple((_KIND_CODE[p.kind], p.target, p.index) for p in predicates)
+
+
 class MazeEnv(MiniGridEnv):
     """A MiniGrid maze declared by a catalogue YAML + ASCII layout (see the module docstring).
 
@@ -168,10 +172,10 @@ class MazeEnv(MiniGridEnv):
             self.observation_space = spaces.Box(-1.0, 1.0, (self._ego_dim,), np.float32)
         else:
             self.observation_space = spaces.Box(0.0, 255.0, (W * H * 3,), np.float32)
-        self._marks = tuple((_KIND_CODE[p.kind], p.target, p.index) for p in spec.landmarks)
 
         # (kind code, target, index) per sub-goal; tuples so the per-step test is a tight loop
-        self._preds = tuple((_KIND_CODE[p.kind], p.target, p.index) for p in spec.predicates)
+        self._preds = _compiled(spec.predicates)
+        self._marks = _compiled(spec.landmarks)     # the egocentric observation's, over the whole catalogue
         self.subgoal_names: list[str] = spec.subgoal_names
         self._goal = lay.goal
         self._doors: list[Door] = []
