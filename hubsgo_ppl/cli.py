@@ -73,6 +73,8 @@ def _fmt_transfer(init: dict[str, Any]) -> str:
             + ", ".join(parts))
     if init.get("schedules"):
         text += "; schedules continued: " + ", ".join(f"loop.{k}={v:g}" for k, v in init["schedules"].items())
+    if init.get("defaults"):
+        text += "; transfer defaults: " + ", ".join(f"loop.{k}={v}" for k, v in init["defaults"].items())
     return text
 
 

@@ -272,13 +272,13 @@ def _start(cfg: RunConfig, out: Path, resume: bool):
             plan = plan_transfer(resolved, cfg.init_from, cfg.transfer)
         except TransferError as exc:
             raise RunError(str(exc)) from None
-        schedules = {}
-        if not cfg.restart_schedules:
-            from ..agents.config import set_keys
-            from .transfer import continued_schedules
+        from ..agents.config import set_keys
+        from .transfer import continued_schedules, transfer_defaults
 
-            schedules = continued_schedules(plan, keep=set_keys(cfg.overrides, "loop"))
-            resolved["hyper"].setdefault("loop", {}).update(schedules)
+        user_set = set_keys(cfg.overrides, "loop")
+        schedules = {} if cfg.restart_schedules else continued_schedules(plan, keep=user_set)
+        defaults = transfer_defaults(plan, keep=user_set)
+        resolved["hyper"].setdefault("loop", {}).update({**schedules, **defaults})
     created = not out.exists()
     _check_writable(out)
     removed = _tidy(out, RUN_FILES)
@@ -304,7 +304,8 @@ def _start(cfg: RunConfig, out: Path, resume: bool):
             from .transfer import TransferError, apply_transfer
 
             try:
-                resolved["init_from"] = {**apply_transfer(agent, plan), "schedules": schedules}
+                resolved["init_from"] = {**apply_transfer(agent, plan), "schedules": schedules,
+                                         "defaults": defaults}
             except TransferError as exc:
                 raise RunError(str(exc)) from None
         write_yaml(out / "config.yaml", resolved)

@@ -11,6 +11,9 @@ Two commands use it:
   along (:data:`SCHEDULES`, :func:`continued_schedules`): the high level's ε, the low level's ε and,
   with the critic, the probability of choosing from Ĝt start where the source run left them, so that a
   policy trained once is not made to act at random again; ``--restart-schedules`` starts them afresh.
+  A transferred critic also changes one loop default (:data:`TRANSFER_DEFAULTS`,
+  :func:`transfer_defaults`): where no critic sample holds every sub-goal the agent has achieved, Ĝt
+  is q's completion of what it holds rather than the unconditional mode.
 
 The remapping rules are in :mod:`.remap`. A transfer (``--init-from``) takes only the networks and the critic's factors; its Ĝt is the
 transferred critic's from the first episode on (not only after the first critic update, which with
@@ -31,9 +34,9 @@ from .io import CheckpointError, load_checkpoint
 from .remap import (TransferError, name_index, remap_critic_state, remap_high_state, remap_low_state,  # noqa: F401
                     remap_rows, revise_agent_state)
 
-__all__ = ["PARTS", "SCHEDULES", "TransferError", "TransferPlan", "name_index", "remap_rows", "remap_critic_state",
+__all__ = ["PARTS", "SCHEDULES", "TRANSFER_DEFAULTS", "TransferError", "TransferPlan", "name_index", "remap_rows", "remap_critic_state",
            "remap_high_state", "remap_low_state", "revise_agent_state", "plan_transfer", "apply_transfer",
-           "continued_schedules",
+           "continued_schedules", "transfer_defaults",
            "config_subgoals"]
 
 #: the parts of an agent ``--transfer`` names
@@ -42,6 +45,13 @@ PARTS = ("critic", "high", "low")
 SCHEDULES = {"critic": ("filter_start", "filter_end", "filter_fraction"),
              "high": ("explore_start", "explore_end", "explore_fraction"),
              "low": ("low_explore_start", "low_explore_end", "low_explore_fraction")}
+#: the loop settings a transferred part changes from the loop's defaults. A transferred critic is
+#: confident of its source run's route from the first episode, before the agent has learned the new
+#: layout, so an agent that picks up the other route's key is common; the unconditional mode
+#: (``filter_fallback: mode``) then names a route it can no longer take and the episode times out,
+#: while q's completion of what it holds names the route it is on (docs/results.md, "Transfer to a
+#: similar task"). From scratch the critic's confidence grows with the agent's, and the two tie.
+TRANSFER_DEFAULTS = {"critic": {"filter_fallback": "completion"}}
 _HIERARCHICAL = ("hubsgo", "hdqn")
 
 
@@ -164,6 +174,12 @@ def continued_schedules(plan: TransferPlan, keep: Sequence[str] = ()) -> dict[st
             value = LinearSchedule(getattr(src, start), getattr(src, end), getattr(src, fraction))(progress)
             out[start] = round(float(value), 6)
     return out
+
+
+def transfer_defaults(plan: TransferPlan, keep: Sequence[str] = ()) -> dict[str, Any]:
+    """``{loop key: value}``: :data:`TRANSFER_DEFAULTS` of the transferred parts, less the keys in
+    ``keep`` (those the user set)."""
+    return {k: v for part in plan.parts for k, v in TRANSFER_DEFAULTS.get(part, {}).items() if k not in keep}
 
 
 def apply_transfer(agent: Any, plan: TransferPlan) -> dict[str, Any]:

@@ -146,6 +146,28 @@ def test_transferred_parts_pick_up_their_schedules_where_the_source_left_them(tm
     assert fresh["explore_start"] == 1.0 and fresh["filter_start"] == 0.5
 
 
+def test_a_transferred_critic_falls_back_to_the_completion_unless_the_user_sets_the_fallback(tmp_path):
+    src = tmp_path / "src"
+    train(RunConfig(task="keydoor", steps=3000, seed=0, overrides=TINY), src, progress=False, stop_at=300)
+    runs = {"all": RunConfig(task="keydoor_moved", overrides=TINY, init_from=str(src)),
+            "critic": RunConfig(task="keydoor_moved", overrides=TINY, init_from=str(src), transfer=["critic"],
+                                restart_schedules=True),
+            "high_low": RunConfig(task="keydoor_moved", overrides=TINY, init_from=str(src), transfer=["high", "low"]),
+            "set": RunConfig(task="keydoor_moved", overrides=[*TINY, "loop.filter_fallback=mode"], init_from=str(src)),
+            "scratch": RunConfig(task="keydoor_moved", overrides=TINY)}
+    for name, cfg in runs.items():
+        train(cfg, tmp_path / name, progress=False, max_episodes=0)
+    got = {name: _loop(tmp_path / name)["filter_fallback"] for name in runs}
+    assert got == {"all": "completion", "critic": "completion", "high_low": "mode", "set": "mode", "scratch": "mode"}
+    record = {name: yaml.safe_load((tmp_path / name / "config.yaml").read_text()).get("init_from", {}).get("defaults")
+              for name in runs}
+    assert record == {"all": {"filter_fallback": "completion"}, "critic": {"filter_fallback": "completion"},
+                      "high_low": {}, "set": {}, "scratch": None}
+    resumed = train(runs["all"], tmp_path / "all", resume=True, progress=False, max_episodes=1)
+    assert resumed["init_from"]["defaults"] == {"filter_fallback": "completion"}
+    assert _loop(tmp_path / "all")["filter_fallback"] == "completion"
+
+
 def test_other_observation_modes_are_refused_in_one_line(sources, tmp_path, capsys):
     out = tmp_path / "ego"
     assert main(["train", "keydoor_moved", "--init-from", str(sources["keydoor"]), "--out", str(out),
