@@ -33,7 +33,11 @@ the plots in :mod:`hubsgo_ppl.diagnostics.plots` move to ``arviz_plots`` (``plot
 ``_AZ_SUMMARY_COLUMNS`` and the three IO/conversion functions are the only touch points.
 
 Importing ArviZ 0.23 emits a once-per-day ``FutureWarning`` announcing that refactor; it is
-silenced for our import only (message-matched), so other ``FutureWarning``s still show.
+silenced for our import only (message-matched), so other ``FutureWarning``s still show. That import
+also writes a date stamp under the user's cache folder through one fixed temporary name, so two
+processes importing ArviZ for the first time on a day (``hubsgo sweep --workers 2``, the measurement
+scripts) can race: the second one's rename finds the temporary file gone and the import fails with
+``FileNotFoundError``. :func:`_import_arviz` retries the import once, by which time the stamp is there.
 """
 
 from __future__ import annotations
@@ -49,12 +53,26 @@ import pandas as pd
 
 from ..experiments.io import atomic_path
 
-with warnings.catch_warnings():
-    # ArviZ 0.23's import-time notice about the 1.x refactor; see the module docstring.
-    warnings.filterwarnings(
-        "ignore", message=r"\s*ArviZ is undergoing a major refactor", category=FutureWarning
-    )
-    import arviz as az
+
+def _import_arviz():
+    """``import arviz``, without its refactor notice, retried once after the daily stamp's race (module
+    docstring)."""
+    import importlib
+    import sys
+
+    with warnings.catch_warnings():
+        # ArviZ 0.23's import-time notice about the 1.x refactor; see the module docstring.
+        warnings.filterwarnings(
+            "ignore", message=r"\s*ArviZ is undergoing a major refactor", category=FutureWarning
+        )
+        try:
+            return importlib.import_module("arviz")
+        except FileNotFoundError:        # another process renamed the stamp's temporary file first
+            sys.modules.pop("arviz", None)
+            return importlib.import_module("arviz")
+
+
+az = _import_arviz()
 
 __all__ = [
     "SUMMARY_COLUMNS",

@@ -283,3 +283,27 @@ def test_import_hides_only_arvizs_refactor_notice(tmp_path):
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "still-raised"
     assert (tmp_path / "arviz" / "daily_warning").is_file()  # the notice really was triggered
+
+
+def test_import_survives_another_process_renaming_the_daily_stamp_first(tmp_path):
+    # Two processes importing ArviZ 0.23 for the first time on a day write the stamp through the same
+    # temporary name; the loser's rename finds it gone. Simulated here: that rename fails once.
+    code = (
+        "import pathlib\n"
+        "real = pathlib.Path.replace\n"
+        "failed = []\n"
+        "def raced(self, target):\n"
+        "    if self.name == 'daily_warning.tmp' and not failed:\n"
+        "        failed.append(self)\n"
+        "        self.unlink()\n"
+        "        raise FileNotFoundError(2, 'No such file or directory', str(self))\n"
+        "    return real(self, target)\n"
+        "pathlib.Path.replace = raced\n"
+        "from hubsgo_ppl.diagnostics.arviz import az\n"
+        "print(len(failed), az.__version__.split('.')[0])\n"
+    )
+    env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path), MPLBACKEND="Agg")
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["1", "0"]          # the race happened, and the import still succeeded
+    assert (tmp_path / "arviz" / "daily_warning").is_file()
