@@ -42,7 +42,9 @@ scripts) can race: the second one's rename finds the temporary file gone and the
 
 from __future__ import annotations
 
+import importlib
 import os
+import sys
 import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -57,9 +59,6 @@ from ..experiments.io import atomic_path
 def _import_arviz():
     """``import arviz``, without its refactor notice, retried once after the daily stamp's race (module
     docstring)."""
-    import importlib
-    import sys
-
     with warnings.catch_warnings():
         # ArviZ 0.23's import-time notice about the 1.x refactor; see the module docstring.
         warnings.filterwarnings(

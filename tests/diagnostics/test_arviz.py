@@ -268,6 +268,15 @@ def test_netcdf_errors_are_clear(tmp_path):
         save_netcdf({"w": 1}, tmp_path / "x.nc")
 
 
+def _run_with_fresh_cache(code: str, cache) -> str:
+    """Run ``code`` in a new interpreter whose user cache folder is ``cache`` (no ArviZ stamp yet, so the
+    import writes one); returns its stdout, after checking that it exited cleanly."""
+    env = dict(os.environ, XDG_CACHE_HOME=str(cache), MPLBACKEND="Agg")
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    return out.stdout
+
+
 def test_import_hides_only_arvizs_refactor_notice(tmp_path):
     # ArviZ 0.23 warns once per day (stamp in the user cache dir); a fresh cache makes it fire.
     code = (
@@ -278,10 +287,7 @@ def test_import_hides_only_arvizs_refactor_notice(tmp_path):
         "except FutureWarning:\n"
         "    print('still-raised')\n"
     )
-    env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path), MPLBACKEND="Agg")
-    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
-    assert out.returncode == 0, out.stderr
-    assert out.stdout.strip() == "still-raised"
+    assert _run_with_fresh_cache(code, tmp_path).strip() == "still-raised"
     assert (tmp_path / "arviz" / "daily_warning").is_file()  # the notice really was triggered
 
 
@@ -302,8 +308,6 @@ def test_import_survives_another_process_renaming_the_daily_stamp_first(tmp_path
         "from hubsgo_ppl.diagnostics.arviz import az\n"
         "print(len(failed), az.__version__.split('.')[0])\n"
     )
-    env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path), MPLBACKEND="Agg")
-    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
-    assert out.returncode == 0, out.stderr
-    assert out.stdout.split() == ["1", "0"]          # the race happened, and the import still succeeded
+    # the race happened, and the import still succeeded
+    assert _run_with_fresh_cache(code, tmp_path).split() == ["1", "0"]
     assert (tmp_path / "arviz" / "daily_warning").is_file()
