@@ -71,7 +71,8 @@ class LoopConfig:
     # achieved sub-goals, q being the prior then; agents/filters.py, BEFORE_UPDATE)
     filter_before_update: str = "g0"
     # Ĝt given the achieved sub-goals where no critic sample holds them all: "mode" (the unconditional
-    # mode) or "completion" (q's completion of them; infer/readout.py, FALLBACK)
+    # mode), "completion" (q's completion of them) or "conditional" (the mode of q given them;
+    # infer/readout.py, FALLBACK)
     filter_fallback: str = "mode"
     eval_filter: float = 1.0                    # greedy evaluation chooses from Ĝt with this probability
     # h-DQN's per-goal annealing (Kulkarni et al. 2016): the low level's ε for goal g is at least
