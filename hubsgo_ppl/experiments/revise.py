@@ -16,8 +16,9 @@ What carries over, matched by name (edges by unordered name pair), and how new p
 in :mod:`hubsgo_ppl.experiments.transfer`: in short, the critic's learned unary and pairwise factors
 of every persisting sub-goal and edge (bit for bit), the high level's Q outputs of persisting
 sub-goals (bit for bit; new outputs: the mean of the kept ones), the low level, the replay buffers
-(remapped), the counters and schedules. The critic's Adam state and its baseline restart: the
-objective changed.
+(remapped), the counters and schedules, the critic's optimiser state and baseline. So a revision that
+changes nothing continues the run exactly as if it had not been made (the test suite checks it):
+whatever a revision changes in the run follows from what it changes in the spec.
 
 The revision is made at the run's checkpoint (the per-episode logs are cut back to it, as on
 ``--resume``) and recorded in the run directory::
