@@ -91,10 +91,10 @@ def finish(rows: list[dict], out, summarise) -> int:
 
 
 def cell(sel: list[dict], key: str) -> str:
-    """``mean ± s.e.`` of ``key`` over the rows ``sel`` (steps with thousands separators and how many
-    rows reached the level)."""
+    """``mean ± s.e.`` of ``key`` over the rows ``sel`` (steps, to 90% success or to the first success,
+    with thousands separators and how many rows reached it)."""
     m, se = mean_se(r[key] for r in sel)
-    if not key.endswith("steps_to_90"):
+    if not (key.endswith("steps_to_90") or key == "first_success"):
         return "-" if math.isnan(m) else f"{m:.3f} ± {se:.3f}"
     reached = sum(math.isfinite(float(r[key])) for r in sel)
     return ("-" if math.isnan(m) else f"{m:,.0f} ± {se:,.0f}") + f" ({reached}/{len(sel)} reached)"

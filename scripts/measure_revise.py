@@ -13,8 +13,9 @@ Per arm it reports, as mean ± standard error over the seeds: the success rate o
 episodes, the mean return over the last third of the budget, and the env steps until the rolling
 success rate (20 episodes) first reaches 90% (runs that never reach it are counted, not averaged), in
 the arm's own run and in total: a restart begins where the other two arms paused, so its total adds
-the B/3 steps spent before the pause. For the revised and unrevised arms also the failed episodes that
-began after the pause and the mean length of the 20th to 60th of those episodes.
+the B/3 steps spent before the pause; and the env step of the first success in the arm's own run.
+For the revised and unrevised arms also the failed episodes that began after the pause and the mean
+length of the 20th to 60th of those episodes.
 Everything goes under ``--out``: one folder per task, seed and arm, ``results.csv`` (one row per run)
 and ``summary.md``. Re-running skips finished runs (the runs are ordinary run directories).
 
@@ -48,7 +49,8 @@ def run_stats(run: Path, budget: int, pause: int | None = None) -> dict[str, flo
     tail = [r for r in rows if float(r["env_steps"]) > budget * 2 / 3] or rows[-1:]
     out = {"episodes": len(rows), "final_success": sum(float(r["success"]) for r in last) / max(len(last), 1),
            "late_return": sum(float(r["return"]) for r in tail) / max(len(tail), 1),
-           "steps_to_90": steps_to(rows)}
+           "steps_to_90": steps_to(rows),
+           "first_success": next((float(r["env_steps"]) for r in rows if float(r["success"])), float("nan"))}
     out["failures_after_pause"] = out["settled_length"] = float("nan")
     if pause is not None:
         after = [r for r in rows if float(r["env_steps"]) - float(r["length"]) >= pause]
@@ -131,8 +133,9 @@ def summarise(rows: list[dict], path: Path) -> str:
     return summary_table(rows, lambda r: r["task"], ARMS,
                          ["task", "arm", "seeds", "success, last 20 episodes", "return, last third",
                           "steps to 90% success (own run)", "total env steps to 90% success",
-                          "failed episodes after B/3", "length of the 20th-60th episode after B/3"],
-                         ["final_success", "late_return", "steps_to_90", "total_steps_to_90",
+                          "first success (own run)", "failed episodes after B/3",
+                          "length of the 20th-60th episode after B/3"],
+                         ["final_success", "late_return", "steps_to_90", "total_steps_to_90", "first_success",
                           "failures_after_pause", "settled_length"], path)
 
 

@@ -34,6 +34,7 @@ def test_failures_and_settled_length_count_episodes_that_began_after_the_pause(t
     out = measure_revise.run_stats(tmp_path / "run", budget=1_700, pause=1_000)
     assert out["failures_after_pause"] == 2
     assert out["settled_length"] == 10
+    assert out["first_success"] == 1_010          # the first 10-step episode, after 1,000 steps of failures
     assert out["episodes"] == 80
     assert out["final_success"] == 1.0
     # the last third of the budget: the episodes ending after 1,133 steps (one failure among them)
@@ -46,6 +47,7 @@ def test_without_a_pause_the_after_pause_measures_are_undefined(tmp_path):
     out = measure_revise.run_stats(tmp_path / "run", budget=1_500)
     assert math.isnan(out["failures_after_pause"]) and math.isnan(out["settled_length"])
     assert out["steps_to_90"] == 20 * 50
+    assert out["first_success"] == 50
 
 
 def test_the_corrected_spec_drops_suggested_sub_goals_and_with_keep_linked_only_unrelated_ones(tmp_path):
