@@ -10,7 +10,9 @@ same unordered pair of names):
   the prior puts it: the prior's natural parameter when the prior is a pairwise MRF on the graph
   (``bernoulli``: logit p, ``ising``: its field), else 0. A new edge starts as a fresh critic of the
   new spec starts it: the prior's coupling with ``inference.init: prior``, else ``init_scale`` times
-  its sign. The MH chains keep their persisting columns and start new ones from the new critic's
+  its sign. The critic's Adam state and its decaying-average baseline restart when the revision
+  changes the critic's objective (any of its sub-goals, edges, signs, graph, prior, likelihood or
+  inference settings), and carry over when it does not; the MH chains keep their persisting columns and start new ones from the new critic's
   seeded random bits.
 - high level, a Q network with one output per sub-goal: the hidden layers are copied, and of the last
   layer the row (weights and bias) of every persisting sub-goal, in the online and the target
@@ -20,14 +22,12 @@ same unordered pair of names):
 - low level (GoalDQN, one block of ``n_actions`` outputs per sub-goal): the same, block by block.
   GoalTD3 and the scripted controller have no per-sub-goal outputs and carry over whole.
 
-When a revision keeps the run (:func:`revise_agent_state`), the rest carries over too: the critic's
-Adam moments (persisting entries bit for bit; a new entry with no momentum and the mean second moment
-of the kept ones) and its decaying-average baseline (one per sample slot, kept while the number of
-samples is), the high level's Adam moments (rows remapped like the weights), its replay (transitions towards a dropped
+When a revision keeps the run (:func:`revise_agent_state`), the rest carries over too: the high
+level's Adam moments (rows remapped like the weights), its replay (transitions towards a dropped
 sub-goal removed, goal indices remapped, a new sub-goal unavailable at every stored s' since it was
 not tracked there), the low level's replay (a new sub-goal's flags set to "already achieved", which
-masks it out of the stored transitions' loss) and its goal weights (``loop.low_goal_weight``; a new
-sub-goal: the mean of the kept ones until the next critic update), the per-goal success rates (new: 0), the RNG streams,
+masks it out of the stored transitions' loss; its goal weights, ``loop.low_goal_weight``, restart
+with the critic's optimiser and carry over with it), the per-goal success rates (new: 0), the RNG streams,
 the counters and so the ε schedules. The filter's outcome window keeps its columns when sub-goals
 are only dropped; when sub-goals are added it restarts, since the stored episodes do not say whether
 they achieved the new ones. The filter's current Ĝt keeps its persisting entries and includes the new
@@ -156,10 +156,8 @@ def remap_critic_state(old: dict[str, Any], fresh_critic: Any, keep_run: bool = 
     old_edges = {frozenset((u, v)): (k, int(s)) for k, (u, v, s) in enumerate(old["edges"])}
     coupling = fresh["coupling"].clone()
     kept_edges, new_edges, resigned = [], [], []
-    edge_index: list[int | None] = []           # for each new edge, its position among the old ones
     for k, (u, v, s) in enumerate(fresh["edges"]):
         hit = old_edges.get(frozenset((u, v)))
-        edge_index.append(None if hit is None else hit[0])
         if hit is None:
             new_edges.append(f"{u}--{v}")
             continue
@@ -189,41 +187,12 @@ def remap_critic_state(old: dict[str, Any], fresh_critic: Any, keep_run: bool = 
     state["baseline"] = {}
     if keep_run:
         state["rng"], state["num_updates"] = old["rng"], int(old["num_updates"])
-        state["optimizer"] = _carry_critic_adam(old["optimizer"], fresh["optimizer"], (index, edge_index))
-        # one decaying average per sample slot: kept while the number of samples is
-        state["baseline"] = {k: v.clone() for k, v in old.get("baseline", {}).items()
-                             if tuple(v.shape) == (fresh["chains"].shape[0],)}
     info = {"subgoals_kept": [n for n, i in zip(new_names, index) if i is not None],
             "subgoals_new": [n for n, i in zip(new_names, index) if i is None],
             "subgoals_dropped": [n for n in old_names if n not in new_names],
             "edges_kept": kept_edges, "edges_new": new_edges, "edges_dropped": dropped_edges,
             "edges_resigned": resigned}
     return state, info
-
-
-def _carry_critic_adam(old: dict[str, Any], fresh: dict[str, Any],
-                       index: tuple[Sequence[int | None], Sequence[int | None]]) -> dict[str, Any]:
-    """The critic's Adam state (parameters 0: theta, 1: coupling) carried over a revision: the moments
-    of every persisting sub-goal and edge bit for bit, the step count kept; a new entry's first moment
-    is 0 and its second the mean of the carried ones, so that its first steps are of the same size as
-    theirs. The parameter groups (learning rate) are the new spec's. An optimiser that has not stepped
-    yet stays fresh."""
-    if not old.get("state"):
-        return copy.deepcopy(fresh)
-    out = {"state": {}, "param_groups": copy.deepcopy(fresh["param_groups"])}
-    for pid, rows in zip((0, 1), index):
-        st = old["state"].get(pid)
-        if not st:
-            continue
-        new = {"step": st["step"].clone() if torch.is_tensor(st["step"]) else st["step"]}
-        for key in ("exp_avg", "exp_avg_sq"):
-            src = st[key]
-            kept = [i for i in rows if i is not None]
-            fill = float(src[kept].mean()) if key == "exp_avg_sq" and kept else 0.0
-            new[key] = torch.stack([src[i].clone() if i is not None else torch.tensor(fill, dtype=src.dtype)
-                                    for i in rows]) if rows else src.new_zeros(0)
-        out["state"][pid] = new
-    return out
 
 
 # -- the high and the low level -----------------------------------------------------------------------
@@ -293,12 +262,6 @@ def remap_low_state(old: dict[str, Any], fresh: dict[str, Any], low: Any, index:
         return out
     out["opt"] = _remap_adam(old["opt"], list(low.q.parameters()), index, block)
     out["steps"] = int(old["steps"])
-    weight = old.get("goal_weight")     # loop.low_goal_weight: persisting sub-goals keep theirs
-    if weight is not None:
-        kept = [float(weight[i]) for i in index if i is not None]
-        mean = sum(kept) / len(kept) if kept else 1.0
-        out["goal_weight"] = torch.tensor([float(weight[i]) if i is not None else mean for i in index],
-                                          dtype=weight.dtype)
     buf = copy.deepcopy(old["buffer"])
     for k in ("before", "after"):           # a sub-goal not tracked then counts as achieved: masked out
         buf["data"][k] = _remap_columns(buf["data"][k], index, True)
@@ -309,12 +272,17 @@ def remap_low_state(old: dict[str, Any], fresh: dict[str, Any], low: Any, index:
 # -- a revision: the whole agent ----------------------------------------------------------------------
 
 
-def revise_agent_state(old: dict[str, Any], agent: Any) -> tuple[dict[str, Any], dict[str, Any]]:
+def revise_agent_state(old: dict[str, Any], agent: Any, same_objective: bool = False) -> tuple[dict[str, Any], dict[str, Any]]:
     """The state of ``old`` (an HRL loop's ``state_dict()`` with a critic) carried over to ``agent``, the
-    same loop built for the revised spec (module docstring). Returns (state for ``agent.load_state_dict``,
-    what was kept)."""
+    same loop built for the revised spec (module docstring). ``same_objective``: the revised spec has the
+    same sub-goals, edges, signs, graph, prior, likelihood and inference settings, so the critic's Adam
+    state and baseline and the low level's goal weights carry over too, and the run continues as if it
+    had not been revised. Returns (state for ``agent.load_state_dict``, what was kept)."""
     fresh = agent.state_dict()
     critic, info = remap_critic_state(old["filter"]["critic"], agent.filter.critic, keep_run=True)
+    if same_objective:
+        src = old["filter"]["critic"]
+        critic["optimizer"], critic["baseline"] = copy.deepcopy(src["optimizer"]), copy.deepcopy(src["baseline"])
     old_names, new_names = list(old["filter"]["critic"]["names"]), list(agent.names)
     index = name_index(old_names, new_names)
     same = old_names == new_names
@@ -322,6 +290,8 @@ def revise_agent_state(old: dict[str, Any], agent: Any) -> tuple[dict[str, Any],
     state["high"] = remap_high_state(old["high"], fresh["high"], list(agent.high.q.parameters()), index)
     if "low" in old:
         state["low"] = remap_low_state(old["low"], fresh["low"], agent.low, index)
+        if same_objective and "goal_weight" in old["low"]:
+            state["low"]["goal_weight"] = old["low"]["goal_weight"]
     mask = old["filter"].get("mask")
     if mask is not None:
         mask = torch.as_tensor(_remap_columns(np.asarray(mask, dtype=bool)[None], index, True)[0])
@@ -337,8 +307,7 @@ def revise_agent_state(old: dict[str, Any], agent: Any) -> tuple[dict[str, Any],
         state["pending"] = []
     info = {**info, "high_outputs_kept": sum(i is not None for i in index), "high_outputs": len(index),
             "pending_discarded": 0 if same else len(old.get("pending", [])),
-            "outcomes_kept": int(outcomes.shape[0]),
-            "critic_optimizer": "carried over" if critic["optimizer"].get("state") else "fresh"}
+            "outcomes_kept": int(outcomes.shape[0]), "critic_optimizer": "carried over" if same_objective else "restarted"}
     return state, info
 
 

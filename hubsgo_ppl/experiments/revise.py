@@ -16,9 +16,11 @@ What carries over, matched by name (edges by unordered name pair), and how new p
 in :mod:`hubsgo_ppl.experiments.transfer`: in short, the critic's learned unary and pairwise factors
 of every persisting sub-goal and edge (bit for bit), the high level's Q outputs of persisting
 sub-goals (bit for bit; new outputs: the mean of the kept ones), the low level, the replay buffers
-(remapped), the counters and schedules, the critic's optimiser state and baseline. So a revision that
-changes nothing continues the run exactly as if it had not been made (the test suite checks it):
-whatever a revision changes in the run follows from what it changes in the spec.
+(remapped), the counters and schedules. A revision that changes the critic's objective (its
+sub-goals, edges, signs, graph, prior, likelihood or inference settings) restarts the critic's Adam
+state and baseline, and the low level's goal weights until the next critic update, so that the critic
+re-fits the changed objective from fresh steps; one that changes none of them carries them over too,
+and the run continues exactly as if it had not been revised.
 
 The revision is made at the run's checkpoint (the per-episode logs are cut back to it, as on
 ``--resume``) and recorded in the run directory::
@@ -152,16 +154,20 @@ def apply_revision(run_dir: str | Path, new_spec: str | Path, steps: int | None 
     number = int(old.get("revision", 0)) + 1
     new["revision"] = number
 
+    changes = spec_changes(old["model_spec"], new["model_spec"])
+    same = (not any(changes[k] for k in ("subgoals_added", "subgoals_dropped", "edges_added", "edges_dropped",
+                                         "edges_resigned"))
+            and all(changes[k] == "same" for k in ("graph", "prior", "likelihood", "inference")))
     env, agent = _build(new)
     with contextlib.closing(env):
         try:
-            state, kept = revise_agent_state(ckpt["agent"], agent)
+            state, kept = revise_agent_state(ckpt["agent"], agent, same_objective=same)
             agent.load_state_dict(state)
         except TransferError as exc:
             raise RunError(f"{run_dir}: cannot revise: {exc}") from None
         record = {"revision": number, "env_steps": done, "episode": int(ckpt["episodes"]),
                   "spec_before": old.get("model"), "spec_after": spec.name, "source": str(new_spec),
-                  **spec_changes(old["model_spec"], new["model_spec"]), "steps": total,
+                  **changes, "steps": total,
                   "kept": {"theta": len(kept["subgoals_kept"]), "couplings": len(kept["edges_kept"]),
                            "high_outputs": kept["high_outputs_kept"]},
                   "new": {"subgoals": kept["subgoals_new"], "edges": kept["edges_new"]},
