@@ -12,8 +12,8 @@ same unordered pair of names):
   new spec starts it: the prior's coupling with ``inference.init: prior``, else ``init_scale`` times
   its sign. The critic's Adam state and its decaying-average baseline restart when the revision
   changes the critic's objective (any of its sub-goals, edges, signs, graph, prior, likelihood or
-  inference settings), and carry over when it does not; the MH chains keep their persisting columns and start new ones from the new critic's
-  seeded random bits.
+  inference settings), and carry over when it does not; the MH chains keep their persisting columns
+  and start new ones from the new critic's seeded random bits.
 - high level, a Q network with one output per sub-goal: the hidden layers are copied, and of the last
   layer the row (weights and bias) of every persisting sub-goal, in the online and the target
   network. A new sub-goal's row is the mean of the rows carried over (of all the old rows when none
@@ -27,8 +27,8 @@ level's Adam moments (rows remapped like the weights), its replay (transitions t
 sub-goal removed, goal indices remapped, a new sub-goal unavailable at every stored s' since it was
 not tracked there), the low level's replay (a new sub-goal's flags set to "already achieved", which
 masks it out of the stored transitions' loss; its goal weights, ``loop.low_goal_weight``, restart
-with the critic's optimiser and carry over with it), the per-goal success rates (new: 0), the RNG streams,
-the counters and so the ε schedules. The filter's outcome window keeps its columns when sub-goals
+with the critic's optimiser and carry over with it), the per-goal success rates (new: 0), the RNG
+streams, the counters and so the ε schedules. The filter's outcome window keeps its columns when sub-goals
 are only dropped; when sub-goals are added it restarts, since the stored episodes do not say whether
 they achieved the new ones. The filter's current Ĝt keeps its persisting entries and includes the new
 sub-goals until the critic's next update. The critic minibatches waiting for a pooled update are
@@ -272,7 +272,8 @@ def remap_low_state(old: dict[str, Any], fresh: dict[str, Any], low: Any, index:
 # -- a revision: the whole agent ----------------------------------------------------------------------
 
 
-def revise_agent_state(old: dict[str, Any], agent: Any, same_objective: bool = False) -> tuple[dict[str, Any], dict[str, Any]]:
+def revise_agent_state(old: dict[str, Any], agent: Any,
+                       same_objective: bool = False) -> tuple[dict[str, Any], dict[str, Any]]:
     """The state of ``old`` (an HRL loop's ``state_dict()`` with a critic) carried over to ``agent``, the
     same loop built for the revised spec (module docstring). ``same_objective``: the revised spec has the
     same sub-goals, edges, signs, graph, prior, likelihood and inference settings, so the critic's Adam
@@ -307,7 +308,8 @@ def revise_agent_state(old: dict[str, Any], agent: Any, same_objective: bool = F
         state["pending"] = []
     info = {**info, "high_outputs_kept": sum(i is not None for i in index), "high_outputs": len(index),
             "pending_discarded": 0 if same else len(old.get("pending", [])),
-            "outcomes_kept": int(outcomes.shape[0]), "critic_optimizer": "carried over" if same_objective else "restarted"}
+            "outcomes_kept": int(outcomes.shape[0]),
+            "critic_optimizer": "carried over" if same_objective else "restarted"}
     return state, info
 
 

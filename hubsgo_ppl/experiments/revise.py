@@ -59,7 +59,7 @@ from .run import (CHECKPOINT, EPISODE_LOGS, REVISIONS_CSV, RunConfig, RunError, 
                   plot_run_curve, train)
 from .remap import TransferError, revise_agent_state
 
-__all__ = ["revise", "apply_revision", "load_revision_spec", "spec_changes", "REVISIONS_DIR", "REVISION_FIELDS"]
+__all__ = ["revise", "apply_revision", "load_revision_spec", "spec_changes", "objective_unchanged", "REVISIONS_DIR", "REVISION_FIELDS"]
 
 REVISIONS_DIR = "revisions"
 #: the columns of revisions.csv (lists joined with spaces)
@@ -105,6 +105,14 @@ def spec_changes(before: dict[str, Any], after: dict[str, Any]) -> dict[str, Any
                                if p in b_edges and b_edges[p] != s],
             "graph": changed("graph"), "prior": changed("prior"), "likelihood": changed("likelihood"),
             "inference": changed("inference")}
+
+
+def objective_unchanged(changes: dict[str, Any]) -> bool:
+    """Whether a revision's ``spec_changes`` leave the critic's objective as it was: no sub-goal or edge
+    added, dropped or re-signed, and the same graph, prior, likelihood and inference settings."""
+    return (not any(changes[k] for k in ("subgoals_added", "subgoals_dropped", "edges_added", "edges_dropped",
+                                         "edges_resigned"))
+            and all(changes[k] == "same" for k in ("graph", "prior", "likelihood", "inference")))
 
 
 def _write_revisions_csv(run_dir: Path, upto: int) -> None:
@@ -155,13 +163,10 @@ def apply_revision(run_dir: str | Path, new_spec: str | Path, steps: int | None 
     new["revision"] = number
 
     changes = spec_changes(old["model_spec"], new["model_spec"])
-    same = (not any(changes[k] for k in ("subgoals_added", "subgoals_dropped", "edges_added", "edges_dropped",
-                                         "edges_resigned"))
-            and all(changes[k] == "same" for k in ("graph", "prior", "likelihood", "inference")))
     env, agent = _build(new)
     with contextlib.closing(env):
         try:
-            state, kept = revise_agent_state(ckpt["agent"], agent, same_objective=same)
+            state, kept = revise_agent_state(ckpt["agent"], agent, same_objective=objective_unchanged(changes))
             agent.load_state_dict(state)
         except TransferError as exc:
             raise RunError(f"{run_dir}: cannot revise: {exc}") from None
