@@ -123,3 +123,47 @@ def output_dir(path):
     out = Path(path)
     out.mkdir(parents=True, exist_ok=True)
     return out
+
+
+SETTINGS = "settings.json"
+
+
+class SettingsMismatch(SystemExit):
+    """``--out`` holds runs made with other settings: Python prints the one-line message and exits with 1."""
+
+
+def _as_flags(settings: dict) -> str:
+    flags = []
+    for key, value in settings.items():
+        if key == "overrides":
+            flags += [f"--set {v}" for v in value]
+        elif value is True:
+            flags.append(f"--{key.replace('_', '-')}")
+        elif value not in (None, False):
+            flags.append(f"--{key.replace('_', '-')} {value}")
+    return " ".join(flags) or "no options"
+
+
+def guard_settings(out, script: str, settings: dict) -> None:
+    """Runs under ``out`` are skipped once finished, whatever made them; so the settings that make a run
+    (the budget, the ``--set`` overrides and the script's own switches, not the seeds or the tasks) are
+    recorded in ``out/settings.json`` at the first use, and a later call with other settings is refused
+    with one line rather than mixing runs of two settings in one table. Seeds and tasks may be added."""
+    import json
+
+    from hubsgo_ppl.experiments.io import write_text
+
+    path = out / SETTINGS
+    record = {"script": script, **settings}
+    if path.exists():
+        try:
+            before = json.loads(path.read_text())
+        except (OSError, ValueError):
+            raise SettingsMismatch(f"{script}: {path} is unreadable; remove it if the runs under {out} "
+                                   f"were made with {_as_flags(settings)}, or choose another --out") from None
+        if before != record:
+            before = {k: v for k, v in before.items() if k != "script"} if isinstance(before, dict) else {}
+            raise SettingsMismatch(f"{script}: {out} holds runs made with {_as_flags(before)}, not "
+                                   f"{_as_flags(settings)}; re-run with those settings or choose another --out")
+        return
+    write_text(path, json.dumps(record, indent=1) + "\n")

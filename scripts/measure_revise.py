@@ -17,7 +17,9 @@ the B/3 steps spent before the pause; and the env step of the first success in t
 For the revised and unrevised arms also the failed episodes that began after the pause and the mean
 length of the 20th to 60th of those episodes.
 Everything goes under ``--out``: one folder per task, seed and arm, ``results.csv`` (one row per run)
-and ``summary.md``. Re-running skips finished runs (the runs are ordinary run directories).
+and ``summary.md``. Re-running skips finished runs (the runs are ordinary run directories), so ``--out``
+remembers its settings (``settings.json``: ``--steps``, ``--set``, ``--threshold``, ``--keep-linked``)
+and refuses other ones; more seeds or tasks may be added.
 
     .venv/bin/python scripts/measure_revise.py --out runs/measure_revise            # 2 tasks x 5 seeds, 40,000 steps
     .venv/bin/python scripts/measure_revise.py --out runs/smoke_revise --smoke        # a pipeline check in a minute
@@ -32,7 +34,7 @@ import shutil
 import sys
 from pathlib import Path
 from typing import Any
-from measure_common import SMOKE, WINDOW, finish, parser, run_jobs, output_dir, steps_to, summary_table  # noqa: E402  (a sibling script module)
+from measure_common import SMOKE, WINDOW, finish, guard_settings, parser, run_jobs, output_dir, steps_to, summary_table  # noqa: E402  (a sibling script module)
 
 ROOT = Path(__file__).resolve().parents[1]
 TASKS = ("keydoor_incorrect", "fourroom_incorrect")
@@ -150,6 +152,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.smoke:
         args.tasks, args.seeds, args.steps, overrides = ["keydoor_incorrect"], args.seeds[:1], 1_500, SMOKE + overrides
     out = output_dir(args.out)
+    guard_settings(out, "measure_revise", {"steps": args.steps, "overrides": overrides, "threshold": args.threshold,
+                                           "keep_linked": args.keep_linked})
     jobs = [(t, s, out, args.steps, overrides, args.threshold, args.keep_linked) for t in args.tasks for s in args.seeds]
     return finish(run_jobs(one, jobs, args.workers), out, summarise)
 

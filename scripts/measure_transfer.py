@@ -16,7 +16,10 @@ one per arm:
 Per arm it reports, as mean ± standard error over the seeds, the env steps until the rolling success
 rate (20 episodes) first reaches 90% (runs that never reach it are counted, not averaged) and the
 success rate over the last 20 episodes. Everything goes under ``--out``: the runs, ``results.csv``
-(one row per target run) and ``summary.md``. Re-running skips finished runs.
+(one row per target run) and ``summary.md``. Re-running skips finished runs, so ``--out`` remembers its
+settings (``settings.json``: ``--steps``, ``--set``, ``--restart-schedules``) and refuses other ones;
+more seeds, sources or arms may be added. To reuse source runs under other settings, copy their
+folders into a new ``--out``.
 
     .venv/bin/python scripts/measure_transfer.py --out runs/measure_transfer        # 3 pairs x 5 seeds x 7 arms
     .venv/bin/python scripts/measure_transfer.py --out runs/smoke_transfer --smoke   # a pipeline check
@@ -30,7 +33,7 @@ from __future__ import annotations
 import shutil
 import sys
 from pathlib import Path
-from measure_common import SMOKE, WINDOW, finish, parser, run_jobs, output_dir, steps_to, summary_table  # noqa: E402  (a sibling script module)
+from measure_common import SMOKE, WINDOW, finish, guard_settings, parser, run_jobs, output_dir, steps_to, summary_table  # noqa: E402  (a sibling script module)
 
 ROOT = Path(__file__).resolve().parents[1]
 PAIRS = {"keydoor": "keydoor_moved", "fourroom": "fourroom_moved", "threepair": "threepair_moved"}
@@ -98,6 +101,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.smoke:
         args.sources, args.seeds, args.steps, overrides = ["keydoor"], args.seeds[:1], 1_000, SMOKE + overrides
     out = output_dir(args.out)
+    guard_settings(out, "measure_transfer", {"steps": args.steps, "overrides": overrides,
+                                             "restart_schedules": args.restart_schedules})
     jobs = [(s, seed, out, args.steps, overrides, args.restart_schedules, tuple(args.arms))
             for s in args.sources for seed in args.seeds]
     return finish(run_jobs(one, jobs, args.workers), out, summarise)
