@@ -4,7 +4,8 @@ Each high-level iteration:
 
 1. the filter offers Ĝt (with ``filter_given_achieved``, given the sub-goals achieved so far); with
    probability ε_filter (rising over training, Sec. 3.4) the high level chooses from Ĝt, otherwise
-   from G0 — in both cases only among sub-goals not yet achieved;
+   from G0 — in both cases only among sub-goals not yet achieved, and when reading Ĝt, with learned
+   initiation sets (``initiation_tries``), not among those options have failed to reach from here;
 2. the high level picks g = argmax Q(s, g') over that set (ε-greedy while training);
 3. the low level acts until g is achieved, the env ends, or ``option_steps`` pass (lines 3-8);
 4. the transition (s, g, R, s', γ^k) goes to the high-level replay; the high level takes a TD step with
@@ -31,6 +32,7 @@ from ..infer.tdbatch import TDBatch
 from .episode import EpisodeStats, EpisodeTally, env_seed, reset_episode
 from .filters import CriticFilter
 from .high_level import HighLevelDQN
+from .initiation import InitiationSets
 from .low_level import GoalDQN
 from .protocols import LowLevel, SubgoalFilter
 from .schedules import LinearSchedule
@@ -126,6 +128,11 @@ class LoopConfig:
     # evaluates the bare greedy policy, which loops for the rest of an episode once it enters a cycle
     # (``hubsgo evaluate --no-break-cycles``).
     eval_break_cycles: bool = True
+    # Learned initiation sets (agents/initiation.py): 0 is off. K > 0: whenever the loop reads Ĝt
+    # (with probability ε_filter) it also leaves out each sub-goal g that options have achieved from
+    # some achieved set but not in K options started from the current one (a door without its key, a
+    # goal behind a closed door). The counts go with the high level in a transfer and a revision
+    initiation_tries: int = 0
 
     def __post_init__(self):
         if self.filter_refresh not in ("option", "episode"):
@@ -151,6 +158,8 @@ class LoopConfig:
             raise ValueError(f"loop.critic_every must be a positive integer, got {self.critic_every!r}")
         if int(self.outcome_window) < 1:
             raise ValueError(f"loop.outcome_window must be a positive integer, got {self.outcome_window!r}")
+        if int(self.initiation_tries) < 0:
+            raise ValueError(f"loop.initiation_tries must be 0 (off) or a positive integer, got {self.initiation_tries!r}")
 
 
 class HRLLoop:
@@ -174,6 +183,8 @@ class HRLLoop:
         self.success_rate = np.zeros(len(self.names))   # per-goal moving average of option success
         self._recent: deque[bool] = deque(maxlen=config.outcome_window)  # success of recent training episodes
         self._pending: list = []                # high-level minibatches waiting for the next critic update
+        self.initiation = (InitiationSets(self.names, config.initiation_tries)
+                           if int(config.initiation_tries) > 0 else None)
         # the weights need a critic to read and a low level that takes them (GoalDQN); without either
         # (h-DQN, a scripted or continuous low level) every sub-goal weighs alike, as with "uniform"
         self._weighs_low = (config.low_goal_weight != "uniform" and isinstance(low, GoalDQN)
@@ -221,10 +232,18 @@ class HRLLoop:
                 or (self.cfg.filter_given_achieved and not np.array_equal(achieved, self._ghat_given))):
             self._read_filter(achieved)
         ghat = self._ghat
-        if ghat is not None and self.rng.random() < filter_eps:
-            restricted = base & ghat
-            if restricted.any():
-                return restricted
+        if self.initiation is None:
+            if ghat is not None and self.rng.random() < filter_eps:
+                restricted = base & ghat
+                if restricted.any():
+                    return restricted
+            return base
+        if self.rng.random() < filter_eps:
+            open_ = base & ~self.initiation.blocked(achieved)
+            restricted = open_ & ghat if ghat is not None else open_
+            for choice in (restricted, open_):
+                if choice.any():
+                    return choice
         return base
 
     def run_episode(self, train: bool = True, seed: int | None = None) -> EpisodeStats:
@@ -261,6 +280,7 @@ class HRLLoop:
                 explore, low_explore = self._cap_by_success(explore, low_explore)
             allowed = self._allowed(achieved, filter_eps)
             g = self.high.select(obs, allowed, explore)
+            started_at = achieved
             chosen.append(self.names[g])
             self.low.begin_option()
             s0, R, k = obs, 0.0, 0
@@ -296,6 +316,8 @@ class HRLLoop:
             if train:
                 a = cfg.success_rate_alpha
                 self.success_rate[g] = (1 - a) * self.success_rate[g] + a * float(achieved[g])
+                if self.initiation is not None:
+                    self.initiation.record(started_at, g, bool(achieved[g]))
             done = terminated or truncated
             if train:
                 available = ~achieved if (~achieved).any() else np.ones_like(achieved)
@@ -353,6 +375,8 @@ class HRLLoop:
              "recent_success": list(self._recent),
              # minibatches waiting for the next pooled critic update (the pool spans episodes)
              "pending": [{f.name: getattr(b, f.name) for f in fields(b)} for b in self._pending]}
+        if self.initiation is not None:
+            s["initiation"] = self.initiation.state_dict()
         if self.low.learns:
             s["low"] = self.low.state_dict()
             s["low_rng"] = self.low.rng.bit_generator.state
@@ -370,6 +394,8 @@ class HRLLoop:
         self._pending = [TDBatch(**b) for b in s.get("pending", [])]
         if "success_rate" in s:
             self.success_rate = np.asarray(s["success_rate"], dtype=float).copy()
+        if self.initiation is not None:
+            self.initiation.load_state_dict(s.get("initiation", {}))
         if self.low.learns:
             self.low.load_state_dict(s["low"])
             self.low.rng.bit_generator.state = s["low_rng"]

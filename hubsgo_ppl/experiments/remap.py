@@ -27,7 +27,8 @@ level's Adam moments (rows remapped like the weights), its replay (transitions t
 sub-goal removed, goal indices remapped, a new sub-goal unavailable at every stored s' since it was
 not tracked there), the low level's replay (a new sub-goal's flags set to "already achieved", which
 masks it out of the stored transitions' loss; its goal weights, ``loop.low_goal_weight``, restart
-with the critic's optimiser and carry over with it), the per-goal success rates (new: 0), the RNG
+with the critic's optimiser and carry over with it), the per-goal success rates (new: 0), the learned
+initiation sets (by name: a set that names a dropped sub-goal goes, a new sub-goal starts uncounted), the RNG
 streams, the counters and so the ε schedules. The filter's outcome window keeps its columns when sub-goals
 are only dropped; when sub-goals are added it restarts, since the stored episodes do not say whether
 they achieved the new ones. The filter's current Ĝt keeps its persisting entries and includes the new

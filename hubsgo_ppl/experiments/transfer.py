@@ -13,7 +13,8 @@ Two commands use it:
   policy trained once is not made to act at random again; ``--restart-schedules`` starts them afresh.
   A transferred critic also changes one loop default (:data:`TRANSFER_DEFAULTS`,
   :func:`transfer_defaults`): where no critic sample holds every sub-goal the agent has achieved, Ĝt
-  is q's completion of what it holds rather than the unconditional mode.
+  is q's completion of what it holds rather than the unconditional mode. A transferred high level
+  brings the initiation sets its source run learned (``loop.initiation_tries``), counts and setting.
 
 The remapping rules are in :mod:`.remap`. A transfer (``--init-from``) takes only the networks and the critic's factors; its Ĝt is the
 transferred critic's from the first episode on (not only after the first critic update, which with
@@ -177,9 +178,14 @@ def continued_schedules(plan: TransferPlan, keep: Sequence[str] = ()) -> dict[st
 
 
 def transfer_defaults(plan: TransferPlan, keep: Sequence[str] = ()) -> dict[str, Any]:
-    """``{loop key: value}``: :data:`TRANSFER_DEFAULTS` of the transferred parts, less the keys in
-    ``keep`` (those the user set)."""
-    return {k: v for part in plan.parts for k, v in TRANSFER_DEFAULTS.get(part, {}).items() if k not in keep}
+    """``{loop key: value}``: :data:`TRANSFER_DEFAULTS` of the transferred parts and, with the high level,
+    the source run's learned initiation sets in use (``loop.initiation_tries``, when the source learned
+    them: its counts come along), less the keys in ``keep`` (those the user set)."""
+    out = {k: v for part in plan.parts for k, v in TRANSFER_DEFAULTS.get(part, {}).items()}
+    tries = int(plan.config["hyper"].get("loop", {}).get("initiation_tries", 0) or 0)
+    if "high" in plan.parts and tries > 0:
+        out["initiation_tries"] = tries
+    return {k: v for k, v in out.items() if k not in keep}
 
 
 def apply_transfer(agent: Any, plan: TransferPlan) -> dict[str, Any]:
@@ -201,6 +207,9 @@ def apply_transfer(agent: Any, plan: TransferPlan) -> dict[str, Any]:
         state["high"] = remap_high_state(plan.agent["high"], fresh["high"], list(agent.high.q.parameters()),
                                          index, keep_run=False)
         mapped["high"] = {"outputs": f"{kept}/{len(new_names)}"}
+        if "initiation" in fresh and "initiation" in plan.agent:    # counts by name (agents/initiation.py)
+            state["initiation"] = plan.agent["initiation"]
+            mapped["high"]["initiation_sets"] = len(plan.agent["initiation"].get("sets", []))
     if "low" in plan.parts:
         state["low"] = remap_low_state(plan.agent["low"], fresh["low"], agent.low, index, keep_run=False)
         mapped["low"] = {"goals": f"{kept}/{len(new_names)}"}

@@ -440,3 +440,36 @@ def test_the_filter_hears_each_training_episode_with_every_subgoal_achieved_on_t
         assert visited.dtype == bool and visited.shape == (len(names),)
         if success:
             assert visited[names.index("goal")]
+
+
+def test_learned_initiation_sets_narrow_the_choice_only_when_the_loop_reads_ghat():
+    loop = _loop(extra=["loop.filter_refresh=option", "loop.initiation_tries=2"])
+    loop.filter = FixedSetFilter([True, True, False, False, True])    # Ĝt: the yellow route
+    start = np.zeros(5, bool)
+    for _ in range(2):
+        loop.initiation.record(start, 1, False)     # yellow_door from the start: fails twice ...
+        loop.initiation.record(start, 4, False)     # ... and so does the goal
+        loop.initiation.record(np.array([True, False, False, False, False]), 1, True)   # the door opens with the key
+    assert loop._allowed(start, filter_eps=1.0).tolist() == [True, False, False, False, True]
+    assert loop._allowed(start, filter_eps=0.0).tolist() == [True] * 5          # G0: nothing left out
+    for _ in range(2):
+        loop.initiation.record(np.array([True, True, False, False, False]), 4, True)
+    assert loop._allowed(start, filter_eps=1.0).tolist() == [True, False, False, False, False]
+    # Ĝt holds nothing open here: the choice is the open sub-goals of G0, not every one
+    loop.filter = FixedSetFilter([False, True, False, False, True])
+    assert loop._allowed(start, filter_eps=1.0).tolist() == [True, False, True, True, False]
+
+
+def test_initiation_sets_count_every_training_option_where_it_started_and_resume():
+    off = _loop(agent="hdqn")
+    assert off.initiation is None and "initiation" not in off.state_dict()
+    on = _loop(agent="hdqn", extra=["loop.initiation_tries=3"])
+    options = sum(on.run_episode().options for _ in range(3))
+    state = on.state_dict()["initiation"]
+    tries = sum(t for row in state["sets"] for t in row["tries"].values())
+    assert tries == options                 # every training option counted once, where it started
+    assert on.run_episode(train=False) and sum(
+        t for row in on.state_dict()["initiation"]["sets"] for t in row["tries"].values()) == tries   # not greedy ones
+    resumed = _loop(agent="hdqn", extra=["loop.initiation_tries=3"])
+    resumed.load_state_dict(on.state_dict())
+    assert resumed.initiation.state_dict() == state

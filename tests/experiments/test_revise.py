@@ -204,3 +204,20 @@ def test_a_run_without_a_critic_is_refused(tmp_path):
     with pytest.raises(RunError, match="agent 'hdqn' has no sub-goal critic to revise"):
         apply_revision(run, "keydoor-specific", steps=600)
     assert not (run / "revisions").exists()
+
+
+def test_a_revision_carries_the_learned_initiation_sets_by_name(tmp_path):
+    spec = _spec(tmp_path / "initial.yaml", "initial", FIVE + CORNERS, EDGES)
+    run = tmp_path / "run"
+    train(RunConfig(task="keydoor_incorrect", model=str(spec), steps=STEPS, seed=1,
+                    overrides=[*TINY, "loop.initiation_tries=3"]), run, progress=False, stop_at=PAUSE)
+    before = load_checkpoint(run / "checkpoint.pt")["agent"]["initiation"]
+    apply_revision(run, _spec(tmp_path / "five.yaml", "five", FIVE, EDGES))
+    after = load_checkpoint(run / "checkpoint.pt")["agent"]["initiation"]
+    # the sets that name no corner stay with their counts, less those of options towards a corner
+    want = [{"achieved": row["achieved"], "tries": {n: t for n, t in row["tries"].items() if n in FIVE},
+             "hits": {n: h for n, h in row["hits"].items() if n in FIVE}}
+            for row in before["sets"] if not set(row["achieved"]) & set(CORNERS)]
+    assert any(set(row["tries"]) & set(CORNERS) for row in before["sets"])     # the drop removes counts
+    assert after == {"names": FIVE, "sets": want}
+    train(RunConfig(task="keydoor_incorrect"), run, resume=True, progress=False)     # and the run goes on

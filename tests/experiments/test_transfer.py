@@ -179,3 +179,25 @@ def test_other_observation_modes_are_refused_in_one_line(sources, tmp_path, caps
     assert not out.exists()
     assert main(["train", "keydoor_moved", "--restart-schedules", "--out", str(out), "--no-progress"]) == 2
     assert "add --init-from RUN" in capsys.readouterr().err
+
+
+def test_a_transferred_high_level_brings_the_initiation_sets_its_source_learned(tmp_path):
+    src = tmp_path / "src"
+    train(RunConfig(task="keydoor", steps=1500, seed=0, overrides=[*TINY, "loop.initiation_tries=4"]), src,
+          progress=False)
+    learned = load_checkpoint(src / "checkpoint.pt")["agent"]["initiation"]
+    assert sum(t for row in learned["sets"] for t in row["tries"].values()) > 0
+    runs = {"all": RunConfig(task="keydoor_moved", overrides=TINY, init_from=str(src)),
+            "low": RunConfig(task="keydoor_moved", overrides=TINY, init_from=str(src), transfer=["low"]),
+            "set": RunConfig(task="keydoor_moved", overrides=[*TINY, "loop.initiation_tries=9"], init_from=str(src)),
+            "off": RunConfig(task="keydoor_moved", overrides=[*TINY, "loop.initiation_tries=0"], init_from=str(src))}
+    for name, cfg in runs.items():
+        train(cfg, tmp_path / name, progress=False, max_episodes=0)
+    agents = {name: load_checkpoint(tmp_path / name / "checkpoint.pt")["agent"] for name in runs}
+    assert {name: _loop(tmp_path / name)["initiation_tries"] for name in runs} == {"all": 4, "low": 0, "set": 9, "off": 0}
+    assert agents["all"]["initiation"] == learned          # the same names: the counts as they were
+    assert agents["set"]["initiation"] == learned
+    assert "initiation" not in agents["low"] and "initiation" not in agents["off"]
+    record = yaml.safe_load((tmp_path / "all" / "config.yaml").read_text())["init_from"]
+    assert record["defaults"] == {"filter_fallback": "completion", "initiation_tries": 4}
+    assert record["mapped"]["high"]["initiation_sets"] == len(learned["sets"])

@@ -1,0 +1,114 @@
+"""Initiation sets of the options, learned from the options the high level has tried.
+
+An option "reach sub-goal g" can succeed only from some achieved sets: a locked door opens only while
+its key is carried, a goal behind a closed door is out of reach. The critic's MRF says which sub-goals
+belong together, not in which order, and a high level's Q(s, g) tells a feasible option from an
+infeasible one only by the discount of the steps it wastes (ten steps cost a factor 0.99^10 = 0.90),
+so early in training, and on a new layout after a transfer, a large share of the options chosen cannot
+succeed from where they start.
+
+:class:`InitiationSets` counts, per achieved set h at an option's start (the sub-goals that held
+then, by name) and per sub-goal g, the options towards g started from h (``tries``) and those that
+achieved g (``hits``). With K = ``after``, sub-goal g is *blocked* at h once at least K options
+towards g have started from h and their success rate there is under 1/K of g's best rate from any
+set with at least K tries: an option that reaches its sub-goal from h only by doing what another
+sub-goal names on the way (the goal from "holding the key", opening the door in passing) or not at
+all. Before g has a rate from K tries anywhere nothing blocks it, and where its best rate is its rate
+from h it stays open, however low, so a skill the low level is still learning is not cut off. The loop leaves blocked sub-goals
+out of a choice whenever it reads Ĝt (with probability ε_filter; ``loop.initiation_tries``), so a
+share of the choices still reads G0 and can undo a block by a success. This is a tabular initiation
+classifier over the sub-goal abstraction, keyed by names, so it carries over to a revised spec and to a
+similar task (``hubsgo train --init-from``, with the high level).
+"""
+
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+import numpy as np
+
+__all__ = ["InitiationSets"]
+
+
+class InitiationSets:
+    """Per (achieved set, sub-goal) counts of options tried and options that achieved their sub-goal."""
+
+    def __init__(self, names: Sequence[str], after: int):
+        if int(after) < 1:
+            raise ValueError(f"loop.initiation_tries must be a positive integer (0: off), got {after!r}")
+        self.names = list(names)
+        self.after = int(after)
+        self._tries: dict[frozenset[int], np.ndarray] = {}
+        self._hits: dict[frozenset[int], np.ndarray] = {}
+        self._best: np.ndarray | None = None       # best_rates(), recomputed after a change
+
+    @staticmethod
+    def _key(achieved: np.ndarray) -> frozenset[int]:
+        return frozenset(int(i) for i in np.flatnonzero(achieved))
+
+    def record(self, achieved: np.ndarray, goal: int, success: bool) -> None:
+        """An option towards ``goal`` started where ``achieved`` (N,) held; ``success``: it achieved it."""
+        key = self._key(achieved)
+        if key not in self._tries:
+            self._tries[key] = np.zeros(len(self.names), dtype=np.int64)
+            self._hits[key] = np.zeros(len(self.names), dtype=np.int64)
+        self._tries[key][goal] += 1
+        if success:
+            self._hits[key][goal] += 1
+        self._best = None
+
+    def best_rates(self) -> np.ndarray:
+        """(N,): each sub-goal's best success rate over the sets with at least K tries (0 where none)."""
+        best = np.zeros(len(self.names))
+        for key, tries in self._tries.items():
+            judged = tries >= self.after
+            if judged.any():
+                rate = np.where(judged, self._hits[key] / np.maximum(tries, 1), 0.0)
+                best = np.maximum(best, rate)
+        return best
+
+    def blocked(self, achieved: np.ndarray) -> np.ndarray:
+        """(N,) bool: the sub-goals blocked at ``achieved`` (module docstring)."""
+        key = self._key(achieved)
+        tries = self._tries.get(key)
+        if tries is None:
+            return np.zeros(len(self.names), dtype=bool)
+        if self._best is None:
+            self._best = self.best_rates()
+        rate = self._hits[key] / np.maximum(tries, 1)
+        return (tries >= self.after) & (rate * self.after < self._best)
+
+    def counts(self, achieved: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(tries, hits) of the options started at ``achieved``, each (N,)."""
+        key = self._key(achieved)
+        zero = np.zeros(len(self.names), dtype=np.int64)
+        return self._tries.get(key, zero).copy(), self._hits.get(key, zero).copy()
+
+    # -- checkpointing: by name, so that a revised or a transferred run maps it -------------------------
+    def state_dict(self) -> dict[str, Any]:
+        rows = []
+        for key in sorted(self._tries, key=lambda k: sorted(k)):
+            rows.append({"achieved": [self.names[i] for i in sorted(key)],
+                         "tries": {n: int(t) for n, t in zip(self.names, self._tries[key]) if t},
+                         "hits": {n: int(h) for n, h in zip(self.names, self._hits[key]) if h}})
+        return {"names": list(self.names), "sets": rows}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Counts by name: an achieved set that names a sub-goal this run lacks is dropped (it is another
+        set here), as are the counts of such a sub-goal; a sub-goal new here starts at zero."""
+        pos = {n: i for i, n in enumerate(self.names)}
+        self._tries, self._hits = {}, {}
+        self._best = None
+        for row in state.get("sets", []):
+            if any(n not in pos for n in row["achieved"]):
+                continue
+            key = frozenset(pos[n] for n in row["achieved"])
+            tries = np.zeros(len(self.names), dtype=np.int64)
+            hits = np.zeros(len(self.names), dtype=np.int64)
+            for n, t in row["tries"].items():
+                if n in pos:
+                    tries[pos[n]] = int(t)
+            for n, h in row["hits"].items():
+                if n in pos:
+                    hits[pos[n]] = int(h)
+            self._tries[key], self._hits[key] = tries, hits
