@@ -9,12 +9,13 @@ succeed from where they start.
 
 :class:`InitiationSets` counts, per achieved set h at an option's start (the sub-goals that held
 then, by name) and per sub-goal g, the options towards g started from h (``tries``) and those that
-achieved g (``hits``). With K = ``after``, sub-goal g is *blocked* at h once at least K options
-towards g have started from h and their success rate there is under 1/K of g's best rate from any
-set with at least K tries: an option that reaches its sub-goal from h only by doing what another
-sub-goal names on the way (the goal from "holding the key", opening the door in passing) or not at
-all. Before g has a rate from K tries anywhere nothing blocks it, and where its best rate is its rate
-from h it stays open, however low, so a skill the low level is still learning is not cut off. The loop leaves blocked sub-goals
+achieved g (``hits``). Sub-goal g is *blocked* at h once an option has achieved it from some other
+set while ``after`` options started from h have not achieved it once. Before g has been achieved
+anywhere nothing says what it needs, so nothing blocks it, and one success from h opens it there
+for good, so an option that succeeds from h only now and then (opening a door in passing on the
+way to the goal) is not blocked: the rule removes the options that never succeed from here. A
+rule that also blocked a rate under 1/K of g's best rate elsewhere was measured and dropped
+(docs/results.md, "Learned initiation sets"). The loop leaves blocked sub-goals
 out of a choice whenever it reads Ĝt (with probability ε_filter; ``loop.initiation_tries``), so a
 share of the choices still reads G0 and can undo a block by a success. This is a tabular initiation
 classifier over the sub-goal abstraction, keyed by names, so it carries over to a revised spec and to a
@@ -40,7 +41,7 @@ class InitiationSets:
         self.after = int(after)
         self._tries: dict[frozenset[int], np.ndarray] = {}
         self._hits: dict[frozenset[int], np.ndarray] = {}
-        self._best: np.ndarray | None = None       # best_rates(), recomputed after a change
+        self._reached = np.zeros(len(self.names), dtype=np.int64)    # hits of g from any set
 
     @staticmethod
     def _key(achieved: np.ndarray) -> frozenset[int]:
@@ -55,17 +56,7 @@ class InitiationSets:
         self._tries[key][goal] += 1
         if success:
             self._hits[key][goal] += 1
-        self._best = None
-
-    def best_rates(self) -> np.ndarray:
-        """(N,): each sub-goal's best success rate over the sets with at least K tries (0 where none)."""
-        best = np.zeros(len(self.names))
-        for key, tries in self._tries.items():
-            judged = tries >= self.after
-            if judged.any():
-                rate = np.where(judged, self._hits[key] / np.maximum(tries, 1), 0.0)
-                best = np.maximum(best, rate)
-        return best
+            self._reached[goal] += 1
 
     def blocked(self, achieved: np.ndarray) -> np.ndarray:
         """(N,) bool: the sub-goals blocked at ``achieved`` (module docstring)."""
@@ -73,10 +64,8 @@ class InitiationSets:
         tries = self._tries.get(key)
         if tries is None:
             return np.zeros(len(self.names), dtype=bool)
-        if self._best is None:
-            self._best = self.best_rates()
-        rate = self._hits[key] / np.maximum(tries, 1)
-        return (tries >= self.after) & (rate * self.after < self._best)
+        hits = self._hits[key]
+        return (tries >= self.after) & (hits == 0) & (self._reached > 0)
 
     def counts(self, achieved: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(tries, hits) of the options started at ``achieved``, each (N,)."""
@@ -98,7 +87,7 @@ class InitiationSets:
         set here), as are the counts of such a sub-goal; a sub-goal new here starts at zero."""
         pos = {n: i for i, n in enumerate(self.names)}
         self._tries, self._hits = {}, {}
-        self._best = None
+        self._reached = np.zeros(len(self.names), dtype=np.int64)
         for row in state.get("sets", []):
             if any(n not in pos for n in row["achieved"]):
                 continue
@@ -112,3 +101,4 @@ class InitiationSets:
                 if n in pos:
                     hits[pos[n]] = int(h)
             self._tries[key], self._hits[key] = tries, hits
+            self._reached += hits
