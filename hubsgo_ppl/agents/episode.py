@@ -29,11 +29,15 @@ class EpisodeStats:
     explore_eps: float
     filter_eps: float
     chosen: list[str] = field(default_factory=list)
+    # per option of an HRL episode: the sub-goals achieved where it started ("from"), its sub-goal
+    # ("goal"), its env steps ("steps") and whether it reached its sub-goal ("reached")
+    option_log: list[dict[str, Any]] = field(default_factory=list)
     scalars: dict[str, float] = field(default_factory=dict)   # means of update diagnostics
 
     def row(self) -> dict[str, Any]:
         d = asdict(self)
         d.pop("chosen")
+        d.pop("option_log")
         d.pop("scalars")
         d["return"] = d.pop("ret")
         d["success"] = int(self.success)
@@ -100,8 +104,9 @@ class EpisodeTally:
         return {k: float(self._mean(v)) for k, v in self._values.items()}
 
     def stats(self, env_steps: int, options: int, explore_eps: float, filter_eps: float,
-              chosen: Iterable[str] = ()) -> EpisodeStats:
+              chosen: Iterable[str] = (), option_log: Iterable[dict[str, Any]] = ()) -> EpisodeStats:
         return EpisodeStats(episode=self.episode, env_steps=env_steps, ret=self.ret, length=self.length,
                             success=self.success, options=options, explore_eps=explore_eps,
-                            filter_eps=filter_eps, chosen=list(chosen), scalars=self.means())
+                            filter_eps=filter_eps, chosen=list(chosen), option_log=list(option_log),
+                            scalars=self.means())
 

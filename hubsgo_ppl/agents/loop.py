@@ -267,6 +267,7 @@ class HRLLoop:
         visited = achieved.copy()                       # achieved at any step of the episode
         options = 0
         chosen: list[str] = []
+        option_log: list[dict[str, Any]] = []
         self._read_filter(achieved)     # with filter_refresh="episode", Ĝt holds until the achieved set changes
         greedy_at: set[tuple[int, bytes]] = set()   # (sub-goal, state) where the low level acted greedily
         breaking = self._break_cycles if train else self.eval_breaks_cycles
@@ -313,6 +314,8 @@ class HRLLoop:
                 if terminated or truncated or achieved[g]:
                     break
             options += 1
+            option_log.append({"from": [n for n, a in zip(self.names, started_at) if a], "goal": self.names[g],
+                               "steps": k, "reached": bool(achieved[g])})
             if train:
                 a = cfg.success_rate_alpha
                 self.success_rate[g] = (1 - a) * self.success_rate[g] + a * float(achieved[g])
@@ -338,7 +341,8 @@ class HRLLoop:
             self.episodes += 1
             if self._break_cycles:
                 tally.put("low/revisits", float(revisits))
-        return tally.stats(self.env_steps, options, explore_eps=explore, filter_eps=filter_eps, chosen=chosen)
+        return tally.stats(self.env_steps, options, explore_eps=explore, filter_eps=filter_eps, chosen=chosen,
+                           option_log=option_log)
 
     def _weigh_low_level(self, learned: bool) -> None:
         """``low_goal_weight``: after a critic update from evidence (or, with "prior_marginal", at the
