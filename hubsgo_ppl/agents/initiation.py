@@ -9,13 +9,17 @@ succeed from where they start.
 
 :class:`InitiationSets` counts, per achieved set h at an option's start (the sub-goals that held
 then, by name) and per sub-goal g, the options towards g started from h (``tries``) and those that
-achieved g (``hits``). Sub-goal g is *blocked* at h once an option has achieved it from some other
-set while ``after`` options started from h have not achieved it once. Before g has been achieved
-anywhere nothing says what it needs, so nothing blocks it, and one success from h opens it there
-for good, so an option that succeeds from h only now and then (opening a door in passing on the
-way to the goal) is not blocked: the rule removes the options that never succeed from here. A
-rule that also blocked a rate under 1/K of g's best rate elsewhere was measured and dropped
-(docs/results.md, "Learned initiation sets"). The loop leaves blocked sub-goals
+achieved g (``hits``). Sub-goal g is *blocked* at h once ``after`` options started from h have not
+achieved it once, while an option has achieved it from a set that holds every sub-goal of h and
+more: what g needs is then something achieved later, a key for its door, an open door for the goal.
+Before g has been achieved anywhere nothing says what it needs, so nothing blocks it; one success
+from h opens it there for good, so an option that succeeds from h only now and then (opening a door
+in passing on the way to the goal) is not blocked. Where sub-goals are positions, achieved only while
+the agent stands there (FourRoom's doorways), a set is where the agent stands, not what it has done,
+and an option that an early low level cannot yet finish within ``option_steps`` from one doorway was
+reached from the empty set, which holds less; so it is not blocked. Two rules were measured and
+dropped (docs/results.md, "Learned initiation sets"): blocking wherever g was reached from any other
+set, and blocking a success rate under 1/K of g's best rate elsewhere. The loop leaves blocked sub-goals
 out of a choice whenever it reads Ĝt (with probability ε_filter; ``loop.initiation_tries``), so a
 share of the choices still reads G0 and can undo a block by a success. This is a tabular initiation
 classifier over the sub-goal abstraction, keyed by names, so it carries over to a revised spec and to a
@@ -65,7 +69,10 @@ class InitiationSets:
         if tries is None:
             return np.zeros(len(self.names), dtype=bool)
         hits = self._hits[key]
-        return (tries >= self.after) & (hits == 0) & (self._reached > 0)
+        out = (tries >= self.after) & (hits == 0) & (self._reached > 0)
+        for g in np.flatnonzero(out):       # reached only from sets that hold more than this one
+            out[g] = any(key < other for other, h in self._hits.items() if h[g] > 0)
+        return out
 
     def counts(self, achieved: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(tries, hits) of the options started at ``achieved``, each (N,)."""
