@@ -45,7 +45,6 @@ class InitiationSets:
         self.after = int(after)
         self._tries: dict[frozenset[int], np.ndarray] = {}
         self._hits: dict[frozenset[int], np.ndarray] = {}
-        self._reached = np.zeros(len(self.names), dtype=np.int64)    # hits of g from any set
 
     @staticmethod
     def _key(achieved: np.ndarray) -> frozenset[int]:
@@ -60,7 +59,6 @@ class InitiationSets:
         self._tries[key][goal] += 1
         if success:
             self._hits[key][goal] += 1
-            self._reached[goal] += 1
 
     def blocked(self, achieved: np.ndarray) -> np.ndarray:
         """(N,) bool: the sub-goals blocked at ``achieved`` (module docstring)."""
@@ -69,8 +67,8 @@ class InitiationSets:
         if tries is None:
             return np.zeros(len(self.names), dtype=bool)
         hits = self._hits[key]
-        out = (tries >= self.after) & (hits == 0) & (self._reached > 0)
-        for g in np.flatnonzero(out):       # reached only from sets that hold more than this one
+        out = (tries >= self.after) & (hits == 0)
+        for g in np.flatnonzero(out):       # reached from a set that holds more than this one
             out[g] = any(key < other for other, h in self._hits.items() if h[g] > 0)
         return out
 
@@ -94,7 +92,6 @@ class InitiationSets:
         set here), as are the counts of such a sub-goal; a sub-goal new here starts at zero."""
         pos = {n: i for i, n in enumerate(self.names)}
         self._tries, self._hits = {}, {}
-        self._reached = np.zeros(len(self.names), dtype=np.int64)
         for row in state.get("sets", []):
             if any(n not in pos for n in row["achieved"]):
                 continue
@@ -108,4 +105,3 @@ class InitiationSets:
                 if n in pos:
                     hits[pos[n]] = int(h)
             self._tries[key], self._hits[key] = tries, hits
-            self._reached += hits

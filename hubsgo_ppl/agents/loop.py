@@ -129,9 +129,10 @@ class LoopConfig:
     # (``hubsgo evaluate --no-break-cycles``).
     eval_break_cycles: bool = True
     # Learned initiation sets (agents/initiation.py): 0 is off. K > 0: whenever the loop reads Ĝt
-    # (with probability ε_filter) it also leaves out each sub-goal g that options have achieved from
-    # some achieved set but not in K options started from the current one (a door without its key, a
-    # goal behind a closed door). The counts go with the high level in a transfer and a revision
+    # (with probability ε_filter) it also leaves out each sub-goal g that K options started from the
+    # current achieved set never reached, once an option reached it from a set holding more (a door
+    # without its key, a goal behind a closed door). The counts go with the high level in a transfer
+    # and a revision
     initiation_tries: int = 0
 
     def __post_init__(self):
@@ -232,14 +233,8 @@ class HRLLoop:
                 or (self.cfg.filter_given_achieved and not np.array_equal(achieved, self._ghat_given))):
             self._read_filter(achieved)
         ghat = self._ghat
-        if self.initiation is None:
-            if ghat is not None and self.rng.random() < filter_eps:
-                restricted = base & ghat
-                if restricted.any():
-                    return restricted
-            return base
-        if self.rng.random() < filter_eps:
-            open_ = base & ~self.initiation.blocked(achieved)
+        if (ghat is not None or self.initiation is not None) and self.rng.random() < filter_eps:
+            open_ = base if self.initiation is None else base & ~self.initiation.blocked(achieved)
             restricted = open_ & ghat if ghat is not None else open_
             for choice in (restricted, open_):
                 if choice.any():
@@ -265,8 +260,6 @@ class HRLLoop:
         tally = EpisodeTally(self.episodes)     # the loop counts success from the steps, not the reset
         achieved = np.asarray(info["subgoals"], dtype=bool)
         visited = achieved.copy()                       # achieved at any step of the episode
-        options = 0
-        chosen: list[str] = []
         option_log: list[dict[str, Any]] = []
         self._read_filter(achieved)     # with filter_refresh="episode", Ĝt holds until the achieved set changes
         greedy_at: set[tuple[int, bytes]] = set()   # (sub-goal, state) where the low level acted greedily
@@ -282,7 +275,6 @@ class HRLLoop:
             allowed = self._allowed(achieved, filter_eps)
             g = self.high.select(obs, allowed, explore)
             started_at = achieved
-            chosen.append(self.names[g])
             self.low.begin_option()
             s0, R, k = obs, 0.0, 0
             terminated = truncated = False
@@ -313,7 +305,6 @@ class HRLLoop:
                 visited |= achieved
                 if terminated or truncated or achieved[g]:
                     break
-            options += 1
             option_log.append({"from": [n for n, a in zip(self.names, started_at) if a], "goal": self.names[g],
                                "steps": k, "reached": bool(achieved[g])})
             if train:
@@ -341,8 +332,8 @@ class HRLLoop:
             self.episodes += 1
             if self._break_cycles:
                 tally.put("low/revisits", float(revisits))
-        return tally.stats(self.env_steps, options, explore_eps=explore, filter_eps=filter_eps, chosen=chosen,
-                           option_log=option_log)
+        return tally.stats(self.env_steps, len(option_log), explore_eps=explore, filter_eps=filter_eps,
+                           chosen=[o["goal"] for o in option_log], option_log=option_log)
 
     def _weigh_low_level(self, learned: bool) -> None:
         """``low_goal_weight``: after a critic update from evidence (or, with "prior_marginal", at the

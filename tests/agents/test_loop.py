@@ -473,3 +473,14 @@ def test_initiation_sets_count_every_training_option_where_it_started_and_resume
     resumed = _loop(agent="hdqn", extra=["loop.initiation_tries=3"])
     resumed.load_state_dict(on.state_dict())
     assert resumed.initiation.state_dict() == state
+
+
+def test_the_loop_logs_every_option_with_its_start_and_outcome():
+    loop = _loop()
+    for _ in range(3):
+        stats = loop.run_episode()
+        assert len(stats.option_log) == stats.options and [o["goal"] for o in stats.option_log] == stats.chosen
+        assert sum(o["steps"] for o in stats.option_log) == stats.length
+        assert all(0 < o["steps"] <= 6 for o in stats.option_log)
+        assert not any(o["goal"] in o["from"] for o in stats.option_log)     # achieved sub-goals are not offered
+        assert "option_log" not in stats.row()
