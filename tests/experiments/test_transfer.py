@@ -31,11 +31,11 @@ def _source(root, task, seed=0):
 @pytest.fixture(scope="module")
 def sources(tmp_path_factory):
     root = tmp_path_factory.mktemp("transfer")
-    return {task: _source(root, task) for task in ("keydoor", "fourroom", "threepair")}
+    return {task: _source(root, task) for task in ("keydoor", "fourroom", "threepair", "vault")}
 
 
 @pytest.mark.parametrize("source, target", [("keydoor", "keydoor_moved"), ("fourroom", "fourroom_moved"),
-                                            ("threepair", "threepair_moved")])
+                                            ("threepair", "threepair_moved"), ("vault", "vault_moved")])
 def test_tiny_transfer_to_the_similar_task(sources, tmp_path, source, target):
     src = load_checkpoint(sources[source] / "checkpoint.pt")["agent"]
     assert src["filter"]["critic"]["num_updates"] > 0
