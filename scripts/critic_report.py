@@ -37,7 +37,9 @@ ROUTES = {
     "threepair": [set(p + ["goal"]) for p in _PAIR + [["red_key", "red_door"]]],
     "twowall": [set(a + b + ["goal"]) for a in _PAIR for b in (["red_key", "red_door"], ["purple_key", "purple_door"])],
     "fourroom": [{"door_top", "door_right", "goal"}, {"door_left", "door_bottom", "goal"}],
+    "vault": [set(p + ["green_door", "goal"]) for p in _PAIR],
 }
+ROUTES["vault_moved"] = ROUTES["vault"]
 
 
 def routes(task: str) -> list[set[str]] | None:

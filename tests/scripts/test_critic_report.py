@@ -66,3 +66,12 @@ def test_seeds_restricts_the_table_to_the_seeds_named(tmp_path, monkeypatch, cap
     cells = [c.strip() for c in row.split("|")]
     # the first window of 20 episodes with 18 successes ends at episode 19 (seed 0) and 21 (seed 2)
     assert cells[3] == "2" and cells[5].startswith("2,100 ± 100")
+
+
+@pytest.mark.parametrize("task", sorted(critic_report.ROUTES))
+def test_every_route_names_sub_goals_of_its_maze(task):
+    from hubsgo_ppl.envs import get_task
+
+    names = set(get_task(task).catalogue.names)
+    for route in critic_report.ROUTES[task]:
+        assert route <= names and "goal" in route, (task, route - names)
