@@ -2,6 +2,8 @@
 options towards a sub-goal that no option of those episodes reached from the same achieved set,
 although one reached it from another (a door chosen before its key is held, a goal chosen behind a
 closed door). These are the options learned initiation sets (``loop.initiation_tries``) leave out.
+Per sub-goal it also counts the options towards it and those that reached it (``reach_by_subgoal``),
+pooled over the seeds at the end: how well the low level's skills work in those episodes.
 
 The run is re-made from its settings, episode by episode, into a temporary folder (the same seed gives
 the same episodes as the run itself) and stops after ``--episodes`` episodes; nothing is written
@@ -40,6 +42,16 @@ def audit(options: list[dict]) -> dict[str, float]:
             "never_step_share": sum(o["steps"] for o in never) / max(steps, 1)}
 
 
+def reach_by_subgoal(options: list[dict]) -> dict[str, list[int]]:
+    """Per sub-goal, ``[options towards it, those that reached it]``, sub-goals in name order."""
+    counts: dict[str, list[int]] = {}
+    for o in options:
+        c = counts.setdefault(o["goal"], [0, 0])
+        c[0] += 1
+        c[1] += bool(o["reached"])
+    return dict(sorted(counts.items()))
+
+
 def one(task: str, seed: int, episodes: int, overrides: list[str], init_from: str | None,
         transfer: list[str] | None) -> dict[str, float]:
     import torch
@@ -53,7 +65,7 @@ def one(task: str, seed: int, episodes: int, overrides: list[str], init_from: st
     with tempfile.TemporaryDirectory() as tmp:
         train(cfg, Path(tmp) / "run", progress=False, max_episodes=episodes,
               on_episode=lambda stats: log.extend(stats.option_log))
-    return {"seed": seed, **audit(log)}
+    return {"seed": seed, **audit(log), "by_subgoal": reach_by_subgoal(log)}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -74,6 +86,14 @@ def main(argv: list[str] | None = None) -> int:
     for key, fmt in (("steps", ",.0f"), ("never_steps", ",.0f"), ("never_step_share", ".3f")):
         m, se = mean_se(r[key] for r in rows)
         print(f"{key}: {m:{fmt}} ± {se:{fmt}} over {len(rows)} seeds")
+    pooled: dict[str, list[int]] = {}
+    for row in rows:
+        for goal, (tried, reached) in row["by_subgoal"].items():
+            c = pooled.setdefault(goal, [0, 0])
+            c[0] += tried
+            c[1] += reached
+    for goal, (tried, reached) in sorted(pooled.items()):
+        print(f"options towards {goal}: {reached} of {tried} reached it ({reached / tried:.3f}), pooled over the seeds")
     return 0
 
 

@@ -25,3 +25,10 @@ def test_the_audit_counts_options_that_never_reached_their_sub_goal_from_their_s
     assert out == {"options": 7, "steps": 57, "never_options": 2, "never_steps": 20,
                    "never_step_share": pytest.approx(20 / 57)}
 
+
+
+def test_reach_by_subgoal_counts_tries_and_successes_per_sub_goal():
+    log = [_o([], "door", 10, False), _o([], "key", 7, True), _o(["key"], "door", 4, True),
+           _o(["key", "door"], "goal", 10, False), _o([], "door", 10, False)]
+    assert option_audit.reach_by_subgoal(log) == {"door": [3, 1], "goal": [1, 0], "key": [1, 1]}
+    assert list(option_audit.reach_by_subgoal(log)) == ["door", "goal", "key"]
