@@ -53,7 +53,8 @@ def reach_by_subgoal(options: list[dict]) -> dict[str, list[int]]:
 
 
 def one(task: str, seed: int, episodes: int, overrides: list[str], init_from: str | None,
-        transfer: list[str] | None) -> dict[str, float]:
+        transfer: list[str] | None) -> list[dict]:
+    """The option log of the first ``episodes`` episodes of the run of ``task`` and ``seed``, re-made."""
     import torch
 
     from hubsgo_ppl.experiments.run import RunConfig, train
@@ -65,7 +66,7 @@ def one(task: str, seed: int, episodes: int, overrides: list[str], init_from: st
     with tempfile.TemporaryDirectory() as tmp:
         train(cfg, Path(tmp) / "run", progress=False, max_episodes=episodes,
               on_episode=lambda stats: log.extend(stats.option_log))
-    return {"seed": seed, **audit(log), "by_subgoal": reach_by_subgoal(log)}
+    return log
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -80,19 +81,14 @@ def main(argv: list[str] | None = None) -> int:
     from measure_common import mean_se
 
     transfer = None if args.transfer is None else args.transfer.split(",")
-    rows = [one(args.task, s, args.episodes, args.overrides, args.init_from, transfer) for s in args.seeds]
+    logs = [one(args.task, s, args.episodes, args.overrides, args.init_from, transfer) for s in args.seeds]
+    rows = [{"seed": s, **audit(log), "by_subgoal": reach_by_subgoal(log)} for s, log in zip(args.seeds, logs)]
     for row in rows:
         print(json.dumps(row))
     for key, fmt in (("steps", ",.0f"), ("never_steps", ",.0f"), ("never_step_share", ".3f")):
         m, se = mean_se(r[key] for r in rows)
         print(f"{key}: {m:{fmt}} ± {se:{fmt}} over {len(rows)} seeds")
-    pooled: dict[str, list[int]] = {}
-    for row in rows:
-        for goal, (tried, reached) in row["by_subgoal"].items():
-            c = pooled.setdefault(goal, [0, 0])
-            c[0] += tried
-            c[1] += reached
-    for goal, (tried, reached) in sorted(pooled.items()):
+    for goal, (tried, reached) in reach_by_subgoal([o for log in logs for o in log]).items():
         print(f"options towards {goal}: {reached} of {tried} reached it ({reached / tried:.3f}), pooled over the seeds")
     return 0
 

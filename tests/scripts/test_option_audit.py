@@ -26,7 +26,6 @@ def test_the_audit_counts_options_that_never_reached_their_sub_goal_from_their_s
                    "never_step_share": pytest.approx(20 / 57)}
 
 
-
 def test_reach_by_subgoal_counts_tries_and_successes_per_sub_goal():
     log = [_o([], "door", 10, False), _o([], "key", 7, True), _o(["key"], "door", 4, True),
            _o(["key", "door"], "goal", 10, False), _o([], "door", 10, False)]
