@@ -36,8 +36,9 @@ def _low_level(kind: str, env: gym.Env, n_goals: int, low_cfg: dict, gen: torch.
     obs_dim = int(np.prod(env.observation_space.shape))
     if kind == "learned" and isinstance(env.action_space, gym.spaces.Discrete):
         potential = getattr(env.unwrapped, "subgoal_potential", lambda: None)()
+        features = getattr(env.unwrapped, "subgoal_features", lambda: None)()
         return GoalDQN(obs_dim, n_goals, int(env.action_space.n), make_config("low", GoalDQNConfig, low_cfg), gen,
-                       rng, potential=potential)
+                       rng, potential=potential, features=features)
     if kind == "scripted" and isinstance(env.action_space, gym.spaces.Discrete):
         from .scripted_maze import ScriptedMaze
 

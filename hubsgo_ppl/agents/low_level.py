@@ -38,6 +38,9 @@ class GoalDQNConfig:
     # potential-based shaping of the intrinsic reward, r + shaping * (gamma * phi(s') - phi(s)), with the
     # env's subgoal_potential (Ng et al. 1999: optimal policies unchanged); 0 turns it off
     shaping: float = 0.0
+    # true, where the env offers subgoal_features (egocentric mazes): one network reads each sub-goal's
+    # row (its offset and kind, nothing naming it) and gives Q(s, g, ·); false: one output head per sub-goal
+    goal_features: bool = False
 
 
 class GoalDQN(LowLevelBase):
@@ -46,7 +49,7 @@ class GoalDQN(LowLevelBase):
     learns = True
 
     def __init__(self, obs_dim: int, n_goals: int, n_actions: int, config: GoalDQNConfig,
-                 generator: torch.Generator, rng: np.random.Generator, potential=None):
+                 generator: torch.Generator, rng: np.random.Generator, potential=None, features=None):
         self.cfg = config
         if config.shaping and potential is None:
             raise ValueError("low.shaping > 0 needs the env's subgoal_potential (symbolic observations); "
@@ -54,8 +57,14 @@ class GoalDQN(LowLevelBase):
         self.potential = potential if config.shaping else None
         self.n_goals, self.n_actions = n_goals, n_actions
         self.rng = rng
-        self.q = mlp(obs_dim, config.hidden, n_goals * n_actions, generator)
-        self.q_target = mlp(obs_dim, config.hidden, n_goals * n_actions, generator)
+        # features(obs) -> (..., N, F): the env's per-sub-goal rows, read by one shared network
+        self.features = features if config.goal_features else None
+        if self.features is not None:
+            self.q = mlp(self.features.dim, config.hidden, n_actions, generator)
+            self.q_target = mlp(self.features.dim, config.hidden, n_actions, generator)
+        else:
+            self.q = mlp(obs_dim, config.hidden, n_goals * n_actions, generator)
+            self.q_target = mlp(obs_dim, config.hidden, n_goals * n_actions, generator)
         self.q_target.load_state_dict(self.q.state_dict())
         self.opt = torch.optim.Adam(self.q.parameters(), lr=config.lr)
         self.buffer = ReplayBuffer(config.buffer_size, rng,
@@ -69,6 +78,8 @@ class GoalDQN(LowLevelBase):
         self.goal_weight: torch.Tensor | None = None
 
     def _q(self, net: nn.Module, obs: torch.Tensor) -> torch.Tensor:
+        if self.features is not None:
+            return net(self.features(obs))
         return net(obs).view(*obs.shape[:-1], self.n_goals, self.n_actions)
 
     def act(self, obs: np.ndarray, goal: int, explore_eps: float, env: gym.Env | None = None) -> int:
@@ -77,7 +88,9 @@ class GoalDQN(LowLevelBase):
         if self.explored:
             return int(self.rng.integers(self.n_actions))
         with torch.no_grad():
-            q = self._q(self.q, torch.as_tensor(obs, dtype=torch.float32))[goal]
+            obs_t = torch.as_tensor(obs, dtype=torch.float32)
+            q = (self.q(self.features(obs_t)[goal]) if self.features is not None
+                 else self._q(self.q, obs_t)[goal])
         return int(q.argmax())
 
     def observe(self, obs, action, next_obs, before, after, terminated) -> dict[str, float] | None:

@@ -254,14 +254,29 @@ def remap_low_state(old: dict[str, Any], fresh: dict[str, Any], low: Any, index:
     block = int(low.n_actions)
     n_old = old["buffer"]["data"]["before"].shape[1]
     outputs = old["q"][_last_layer(old["q"])[1]].shape[0]
-    if outputs != n_old * block:
+    shared = getattr(low, "features", None) is not None      # one network for every sub-goal
+    old_shared = outputs == block and n_old > 1
+    if shared and outputs != block or not shared and old_shared:
+        have, want = (("one head per sub-goal", "one network over the sub-goals' features") if shared
+                      else ("one network over the sub-goals' features", "one head per sub-goal"))
+        raise TransferError(f"low level: the source has {have}, this run {want}; train both with the same "
+                            f"low.goal_features")
+    if not shared and outputs != n_old * block:
         raise TransferError(f"low level: the source acts with {outputs // max(n_old, 1)} actions, this task with {block}")
     out = dict(fresh)
-    out["q"] = remap_net(old["q"], fresh["q"], index, block, "low level")
-    out["q_target"] = remap_net(old["q_target"], fresh["q_target"], index, block, "low level (target)")
+    if shared:                              # no per-sub-goal outputs: the networks whole
+        for key in ("q", "q_target"):
+            if any(old[key][k].shape != v.shape for k, v in fresh[key].items()):
+                raise TransferError("low level: the source reads sub-goal features of another size; "
+                                    "leave out the low level (--transfer critic,high)")
+            out[key] = old[key]
+    else:
+        out["q"] = remap_net(old["q"], fresh["q"], index, block, "low level")
+        out["q_target"] = remap_net(old["q_target"], fresh["q_target"], index, block, "low level (target)")
     if not keep_run:
         return out
-    out["opt"] = _remap_adam(old["opt"], list(low.q.parameters()), index, block)
+    out["opt"] = (copy.deepcopy(old["opt"]) if shared
+                  else _remap_adam(old["opt"], list(low.q.parameters()), index, block))
     out["steps"] = int(old["steps"])
     buf = copy.deepcopy(old["buffer"])
     for k in ("before", "after"):           # a sub-goal not tracked then counts as achieved: masked out

@@ -29,6 +29,7 @@ from typing import Any, Sequence
 
 import torch
 
+from ..agents.low_level import GoalDQNConfig
 from ..envs import get_task
 from ..envs.subset import make_subset
 from .io import CheckpointError, load_checkpoint
@@ -99,6 +100,16 @@ def _learned_low(config: dict[str, Any]) -> bool:
     return config.get("agent") in _HIERARCHICAL and config["hyper"].get("low_level", "learned") == "learned"
 
 
+def _shared_low(low: Any, n_actions: int) -> bool | None:
+    """Whether a GoalDQN state is one network over the sub-goals' features (True) or has one output head
+    per sub-goal (False); None for other low levels."""
+    if not (isinstance(low, dict) and "q" in low and "buffer" in low):
+        return None
+    q = low["q"]
+    last = max(int(k.split(".")[0]) for k in q if k.endswith(".weight"))
+    return int(q[f"{last}.bias"].shape[0]) == int(n_actions) and low["buffer"]["data"]["before"].shape[1] > 1
+
+
 def plan_transfer(resolved: dict[str, Any], source: str | Path,
                   parts: Sequence[str] | str | None = None) -> TransferPlan:
     """Check that the run ``source`` can start the run ``resolved`` describes and load what it needs.
@@ -146,6 +157,15 @@ def plan_transfer(resolved: dict[str, Any], source: str | Path,
         if "low" in chosen and src_n != dst_n:
             raise TransferError(f"--init-from {src_dir}: action counts differ: {src['task']} has {src_n} actions, "
                                 f"{resolved['task']} {dst_n}; leave out the low level (--transfer critic,high)")
+        if "low" in chosen:
+            src_shared = _shared_low(ckpt["agent"].get("low"), src_n)
+            dst_shared = dst_mode == "egocentric" and bool(resolved["hyper"].get("low", {}).get("goal_features", GoalDQNConfig.goal_features))
+            if src_shared is not None and src_shared != dst_shared:
+                have, want = (("one network over the sub-goals' features", "one head per sub-goal") if src_shared
+                              else ("one head per sub-goal", "one network over the sub-goals' features"))
+                raise TransferError(f"--init-from {src_dir}: the low level of the source run has {have}, this run "
+                                    f"{want}; set --set low.goal_features={str(src_shared).lower()} or leave out "
+                                    f"--transfer low")
         for part in ("high", "low"):
             a = list(src["hyper"].get(part, {}).get("hidden", []))
             b = list(resolved["hyper"].get(part, {}).get("hidden", []))

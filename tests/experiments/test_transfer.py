@@ -201,3 +201,25 @@ def test_a_transferred_high_level_brings_the_initiation_sets_its_source_learned(
     record = yaml.safe_load((tmp_path / "all" / "config.yaml").read_text())["init_from"]
     assert record["defaults"] == {"filter_fallback": "completion", "initiation_tries": 4}
     assert record["mapped"]["high"]["initiation_sets"] == len(learned["sets"])
+
+
+def test_an_egocentric_low_level_is_one_network_that_transfers_whole_and_refuses_per_goal_heads(tmp_path, capsys):
+    ego = TINY + ["env.obs_mode=egocentric", "low.goal_features=true"]
+    src = tmp_path / "src"
+    train(RunConfig(task="vault", steps=500, seed=0, overrides=ego), src, progress=False)
+    low = load_checkpoint(src / "checkpoint.pt")["agent"]["low"]
+    assert low["q"]["2.weight"].shape[0] == 5       # one output per action, none per sub-goal
+    out = tmp_path / "dst"
+    train(RunConfig(task="vault_moved", steps=500, seed=1, overrides=ego, init_from=str(src), transfer=["low"]),
+          out, progress=False, max_episodes=0)
+    got = load_checkpoint(out / "checkpoint.pt")["agent"]["low"]
+    for net in ("q", "q_target"):
+        assert all(torch.equal(got[net][k], v) for k, v in low[net].items())
+    heads = tmp_path / "heads"
+    assert main(["train", "vault_moved", "--init-from", str(src), "--transfer", "low", "--out", str(heads),
+                 "--no-progress", *CLI_TINY, "--set", "env.obs_mode=egocentric"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].endswith("the low level of the source run has one network over the sub-goals' "
+                                             "features, this run one head per sub-goal; set --set "
+                                             "low.goal_features=true or leave out --transfer low"), err
+    assert not heads.exists()

@@ -377,6 +377,36 @@ class MazeEnv(MiniGridEnv):
 
         return phi
 
+    def subgoal_features(self):
+        """feat(obs) -> (..., N, F): what a goal-conditioned low level reads for each sub-goal, or None
+        where the observation names absolute cells (symbolic and image).
+
+        From an egocentric observation, sub-goal i's row is what the agent sees and holds (carrying,
+        every landmark's achievement flag, the window) followed by i's own achievement flag, the offset
+        to i's target and i's kind (at or goal, carrying, door open, one-hot). The other sub-goals'
+        offsets are left out and nothing names i, so one network serves every sub-goal: a step towards
+        the target's offset means the same for a key as for a door, on this layout or a moved one.
+        """
+        if self.obs_mode != "egocentric":
+            return None
+        import torch
+
+        marks = [p.name for p in self.spec_maze.landmarks]
+        n = len(marks)
+        mark = torch.tensor([marks.index(name) for name in self.subgoal_names])
+        shared = torch.cat([torch.arange(0, 1 + n), torch.arange(1 + 3 * n, self._ego_dim)])
+        own = torch.stack([1 + mark, 1 + n + 2 * mark, 2 + n + 2 * mark], dim=1)       # (N, 3)
+        kind = torch.zeros(len(self._preds), 3)
+        kind[torch.arange(len(self._preds)), torch.tensor([code for code, _, _ in self._preds])] = 1.0
+        n_goals = len(self._preds)
+
+        def feat(obs: "torch.Tensor") -> "torch.Tensor":
+            base = obs[..., shared].unsqueeze(-2).expand(*obs.shape[:-1], n_goals, shared.numel())
+            return torch.cat([base, obs[..., own], kind.expand(*obs.shape[:-1], n_goals, 3)], dim=-1)
+
+        feat.dim = int(shared.numel()) + 6
+        return feat
+
     def symbolic_state(self) -> MazeState:
         """The hashable full state (position, direction, carried object, object cells, door states)."""
         carrying = -1
