@@ -221,3 +221,25 @@ def test_a_revision_carries_the_learned_initiation_sets_by_name(tmp_path):
     assert any(set(row["tries"]) & set(CORNERS) for row in before["sets"])     # the drop removes counts
     assert after == {"names": FIVE, "sets": want}
     train(RunConfig(task="keydoor_incorrect"), run, resume=True, progress=False)     # and the run goes on
+
+
+def test_a_revision_keeps_a_shared_low_level_whole_and_drops_the_dropped_goals_from_its_buffer(tmp_path):
+    spec = _spec(tmp_path / "initial.yaml", "initial", FIVE + CORNERS, EDGES)
+    run = tmp_path / "run"
+    train(RunConfig(task="keydoor_incorrect", model=str(spec), steps=STEPS, seed=1,
+                    overrides=[*TINY, "env.obs_mode=egocentric", "low.goal_features=true"]),
+          run, progress=False, stop_at=PAUSE)
+    before = load_checkpoint(run / "checkpoint.pt")["agent"]["low"]
+    apply_revision(run, _spec(tmp_path / "five.yaml", "five", FIVE, EDGES))
+    after = load_checkpoint(run / "checkpoint.pt")["agent"]["low"]
+    for net in ("q", "q_target"):       # one network for every sub-goal: nothing to add or drop
+        assert after[net].keys() == before[net].keys()
+        assert all(torch.equal(after[net][k], before[net][k]) for k in before[net])
+    n = before["buffer"]["data"]["before"].shape[0]
+    kept = [(FIVE + CORNERS).index(g) for g in FIVE]
+    for k in ("before", "after"):       # the buffer's achievement columns follow the spec by name
+        assert after["buffer"]["data"][k].shape == (n, 5)
+        assert torch.equal(torch.as_tensor(after["buffer"]["data"][k]),
+                           torch.as_tensor(before["buffer"]["data"][k])[:, kept])
+    train(RunConfig(task="keydoor_incorrect"), run, resume=True, progress=False)
+    assert load_checkpoint(run / "checkpoint.pt")["env_steps"] >= STEPS
