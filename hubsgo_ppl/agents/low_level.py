@@ -89,7 +89,7 @@ class GoalDQN(LowLevelBase):
             return int(self.rng.integers(self.n_actions))
         with torch.no_grad():
             obs_t = torch.as_tensor(obs, dtype=torch.float32)
-            q = (self.q(self.features(obs_t)[goal]) if self.features is not None
+            q = (self.q(self.features(obs_t)[goal]) if self.features is not None     # goal's row only
                  else self._q(self.q, obs_t)[goal])
         return int(q.argmax())
 

@@ -20,7 +20,8 @@ same unordered pair of names):
   is), so a greedy high level starts it at the value of an average known sub-goal, neither preferred
   nor avoided. Dropped rows go.
 - low level (GoalDQN, one block of ``n_actions`` outputs per sub-goal): the same, block by block.
-  GoalTD3 and the scripted controller have no per-sub-goal outputs and carry over whole.
+  GoalTD3, the scripted controller and a GoalDQN over the sub-goals' features (``low.goal_features``)
+  have no per-sub-goal outputs and carry over whole.
 
 When a revision keeps the run (:func:`revise_agent_state`), the rest carries over too: the high
 level's Adam moments (rows remapped like the weights), its replay (transitions towards a dropped
@@ -83,6 +84,17 @@ def _last_layer(state: dict[str, torch.Tensor]) -> tuple[str, str]:
     """The keys of the last Linear layer (weight, bias) of an ``nn.Sequential`` MLP's state dict."""
     last = max(int(k.split(".")[0]) for k in state if k.endswith(".weight"))
     return f"{last}.weight", f"{last}.bias"
+
+
+# the two forms of a learned grid low level (GoalDQN), as a refusal names them
+LOW_FORM = {True: "one network over the sub-goals' features", False: "one head per sub-goal"}
+
+
+def low_is_shared(state: dict[str, Any], n_actions: int) -> bool:
+    """Whether a GoalDQN state is one network over the sub-goals' features (one output per action)
+    rather than one output head per sub-goal."""
+    outputs = state["q"][_last_layer(state["q"])[1]].shape[0]
+    return outputs == int(n_actions) and state["buffer"]["data"]["before"].shape[1] > 1
 
 
 def remap_net(old: dict[str, torch.Tensor], fresh: dict[str, torch.Tensor], index: Sequence[int | None],
@@ -255,12 +267,9 @@ def remap_low_state(old: dict[str, Any], fresh: dict[str, Any], low: Any, index:
     n_old = old["buffer"]["data"]["before"].shape[1]
     outputs = old["q"][_last_layer(old["q"])[1]].shape[0]
     shared = getattr(low, "features", None) is not None      # one network for every sub-goal
-    old_shared = outputs == block and n_old > 1
-    if shared and outputs != block or not shared and old_shared:
-        have, want = (("one head per sub-goal", "one network over the sub-goals' features") if shared
-                      else ("one network over the sub-goals' features", "one head per sub-goal"))
-        raise TransferError(f"low level: the source has {have}, this run {want}; train both with the same "
-                            f"low.goal_features")
+    if (outputs != block) if shared else low_is_shared(old, block):
+        raise TransferError(f"low level: the source has {LOW_FORM[not shared]}, this run {LOW_FORM[shared]}; "
+                            f"train both with the same low.goal_features")
     if not shared and outputs != n_old * block:
         raise TransferError(f"low level: the source acts with {outputs // max(n_old, 1)} actions, this task with {block}")
     out = dict(fresh)

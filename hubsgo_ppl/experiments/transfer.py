@@ -33,8 +33,8 @@ from ..agents.low_level import GoalDQNConfig
 from ..envs import get_task
 from ..envs.subset import make_subset
 from .io import CheckpointError, load_checkpoint
-from .remap import (TransferError, name_index, remap_critic_state, remap_high_state, remap_low_state,  # noqa: F401
-                    remap_rows, revise_agent_state)
+from .remap import (LOW_FORM, TransferError, low_is_shared, name_index, remap_critic_state,  # noqa: F401
+                    remap_high_state, remap_low_state, remap_rows, revise_agent_state)
 
 __all__ = ["PARTS", "SCHEDULES", "TRANSFER_DEFAULTS", "TransferError", "TransferPlan", "name_index", "remap_rows", "remap_critic_state",
            "remap_high_state", "remap_low_state", "revise_agent_state", "plan_transfer", "apply_transfer",
@@ -100,16 +100,6 @@ def _learned_low(config: dict[str, Any]) -> bool:
     return config.get("agent") in _HIERARCHICAL and config["hyper"].get("low_level", "learned") == "learned"
 
 
-def _shared_low(low: Any, n_actions: int) -> bool | None:
-    """Whether a GoalDQN state is one network over the sub-goals' features (True) or has one output head
-    per sub-goal (False); None for other low levels."""
-    if not (isinstance(low, dict) and "q" in low and "buffer" in low):
-        return None
-    q = low["q"]
-    last = max(int(k.split(".")[0]) for k in q if k.endswith(".weight"))
-    return int(q[f"{last}.bias"].shape[0]) == int(n_actions) and low["buffer"]["data"]["before"].shape[1] > 1
-
-
 def plan_transfer(resolved: dict[str, Any], source: str | Path,
                   parts: Sequence[str] | str | None = None) -> TransferPlan:
     """Check that the run ``source`` can start the run ``resolved`` describes and load what it needs.
@@ -158,14 +148,15 @@ def plan_transfer(resolved: dict[str, Any], source: str | Path,
             raise TransferError(f"--init-from {src_dir}: action counts differ: {src['task']} has {src_n} actions, "
                                 f"{resolved['task']} {dst_n}; leave out the low level (--transfer critic,high)")
         if "low" in chosen:
-            src_shared = _shared_low(ckpt["agent"].get("low"), src_n)
-            dst_shared = dst_mode == "egocentric" and bool(resolved["hyper"].get("low", {}).get("goal_features", GoalDQNConfig.goal_features))
-            if src_shared is not None and src_shared != dst_shared:
-                have, want = (("one network over the sub-goals' features", "one head per sub-goal") if src_shared
-                              else ("one head per sub-goal", "one network over the sub-goals' features"))
-                raise TransferError(f"--init-from {src_dir}: the low level of the source run has {have}, this run "
-                                    f"{want}; set --set low.goal_features={str(src_shared).lower()} or leave out "
-                                    f"--transfer low")
+            low = ckpt["agent"].get("low")
+            goal_dqn = isinstance(low, dict) and "q" in low and "buffer" in low
+            src_shared = goal_dqn and low_is_shared(low, src_n)
+            dst_shared = dst_mode == "egocentric" and bool(
+                resolved["hyper"].get("low", {}).get("goal_features", GoalDQNConfig.goal_features))
+            if goal_dqn and src_shared != dst_shared:
+                raise TransferError(f"--init-from {src_dir}: the low level of the source run has {LOW_FORM[src_shared]}, "
+                                    f"this run {LOW_FORM[dst_shared]}; set --set low.goal_features="
+                                    f"{str(src_shared).lower()} or leave out --transfer low")
         for part in ("high", "low"):
             a = list(src["hyper"].get(part, {}).get("hidden", []))
             b = list(resolved["hyper"].get(part, {}).get("hidden", []))
