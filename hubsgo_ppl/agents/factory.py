@@ -22,7 +22,7 @@ import torch
 
 from .config import HIERARCHICAL, make_config
 from .filters import CriticFilter, NoFilter
-from .high_level import HighLevelConfig, HighLevelDQN
+from .high_level import HighLevelConfig, HighLevelDQN, linked_rows
 from .loop import HRLLoop, LoopConfig
 from .low_level import GoalDQN, GoalDQNConfig, ScriptedLowLevel
 from .protocols import LowLevel
@@ -54,6 +54,16 @@ def _low_level(kind: str, env: gym.Env, n_goals: int, low_cfg: dict, gen: torch.
     raise ValueError(f"unknown low level {kind!r}; use 'learned' or 'scripted'")
 
 
+def _high_features(env: gym.Env, names: list[str], critic: Any, config: HighLevelConfig) -> Any:
+    """The high level's per-sub-goal rows (:func:`linked_rows`) with the spec's edges, or None."""
+    features = getattr(env.unwrapped, "subgoal_features", lambda: None)() if config.goal_features else None
+    if features is None:
+        return None
+    graph = getattr(critic, "graph", None)
+    edges = [] if graph is None else [(names.index(u), names.index(v), s) for u, v, s in graph.edges]
+    return linked_rows(features, len(names), edges)
+
+
 def build_hierarchical(agent: str, env: gym.Env, cfg: dict[str, Any], seed: int, critic: Any = None) -> HRLLoop:
     names = list(env.unwrapped.subgoal_names)
     n = len(names)
@@ -62,7 +72,8 @@ def build_hierarchical(agent: str, env: gym.Env, cfg: dict[str, Any], seed: int,
     low_rng = stream_rng(seed, LOW_LEVEL_STREAM)
     obs_dim = int(np.prod(env.observation_space.shape))
     loop_cfg = make_config("loop", LoopConfig, cfg.get("loop", {}), total_steps=int(cfg["steps"]))
-    high = HighLevelDQN(obs_dim, n, make_config("high", HighLevelConfig, cfg.get("high", {})), gen, high_rng)
+    high_cfg = make_config("high", HighLevelConfig, cfg.get("high", {}))
+    high = HighLevelDQN(obs_dim, n, high_cfg, gen, high_rng, features=_high_features(env, names, critic, high_cfg))
     low = _low_level(cfg.get("low_level", "learned"), env, n, cfg.get("low", {}), gen, low_rng)
     if agent == "hubsgo":
         if critic is None:

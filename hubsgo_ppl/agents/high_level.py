@@ -23,7 +23,7 @@ purpose:
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import numpy as np
 import torch
@@ -34,7 +34,7 @@ from ..infer.critic import TDBatch
 from .buffers import ReplayBuffer
 from .nets import mlp
 
-__all__ = ["HighLevelConfig", "HighLevelBatch", "HighLevelDQN", "masked_max"]
+__all__ = ["HighLevelConfig", "HighLevelBatch", "HighLevelDQN", "linked_rows", "masked_max"]
 
 
 @dataclass
@@ -48,6 +48,30 @@ class HighLevelConfig:
     target_tau: float = 0.02       # Polyak rate of the target network
     double_q: bool = True
     grad_clip: float = 10.0
+    # true, where the env offers subgoal_features (egocentric mazes): one network reads each sub-goal's
+    # row, extended by whether a sub-goal the spec joins to it by a positive edge, and by a negative
+    # one, is achieved, and gives Q(s, g); nothing in a row names g. false: one output per sub-goal
+    goal_features: bool = False
+
+
+def linked_rows(features: Callable, n_goals: int, edges: Sequence[tuple[int, int, int]] = ()) -> Callable:
+    """``features`` (the env's per-sub-goal rows, obs -> (..., N, F)) with two columns more per row:
+    whether a sub-goal joined to it by a positive edge is achieved, and whether one joined by a negative
+    edge is. The achievement flags are the rows' own (column ``features.flag``)."""
+    pos = torch.zeros(n_goals, n_goals)
+    neg = torch.zeros(n_goals, n_goals)
+    for u, v, sign in edges:
+        if sign:
+            links = pos if sign > 0 else neg
+            links[u, v] = links[v, u] = 1.0
+
+    def feat(obs: torch.Tensor) -> torch.Tensor:
+        rows = features(obs)
+        done = rows[..., features.flag].unsqueeze(-2)                  # (..., 1, N)
+        return torch.cat([rows, (done * pos).amax(-1, keepdim=True), (done * neg).amax(-1, keepdim=True)], -1)
+
+    feat.dim = int(features.dim) + 2
+    return feat
 
 
 def masked_max(values: torch.Tensor, mask: torch.Tensor, empty: float = 0.0) -> torch.Tensor:
@@ -68,12 +92,18 @@ class HighLevelDQN:
     """Q(s, g) learner with ε-greedy selection restricted to an allowed set."""
 
     def __init__(self, obs_dim: int, n_goals: int, config: HighLevelConfig,
-                 generator: torch.Generator, rng: np.random.Generator):
+                 generator: torch.Generator, rng: np.random.Generator, features: Callable | None = None):
         self.cfg = config
         self.n_goals = n_goals
         self.rng = rng
-        self.q = mlp(obs_dim, config.hidden, n_goals, generator)
-        self.q_target = mlp(obs_dim, config.hidden, n_goals, generator)
+        # features(obs) -> (..., N, F): per-sub-goal rows (linked_rows), read by one shared network
+        self.features = features if config.goal_features else None
+        if self.features is not None:
+            self.q = mlp(self.features.dim, config.hidden, 1, generator)
+            self.q_target = mlp(self.features.dim, config.hidden, 1, generator)
+        else:
+            self.q = mlp(obs_dim, config.hidden, n_goals, generator)
+            self.q_target = mlp(obs_dim, config.hidden, n_goals, generator)
         self.q_target.load_state_dict(self.q.state_dict())
         self.opt = torch.optim.Adam(self.q.parameters(), lr=config.lr)
         self.buffer = ReplayBuffer(config.buffer_size, rng, dtypes={"goal": np.int64, "available": bool},
@@ -81,9 +111,15 @@ class HighLevelDQN:
                                    discount=(), available=(n_goals,))
         self.updates = 0
 
+    def _q(self, net: nn.Module, obs: torch.Tensor) -> torch.Tensor:
+        """(..., N) values of every sub-goal."""
+        if self.features is not None:
+            return net(self.features(obs)).squeeze(-1)
+        return net(obs)
+
     @torch.no_grad()
     def q_values(self, obs: np.ndarray) -> np.ndarray:
-        return self.q(torch.as_tensor(obs, dtype=torch.float32)).numpy()
+        return self._q(self.q, torch.as_tensor(obs, dtype=torch.float32)).numpy()
 
     def select(self, obs: np.ndarray, allowed: np.ndarray, explore_eps: float) -> int:
         """ε-greedy over ``allowed`` (Sec. 3.4: g_t = argmax_{g' ∈ Ĝt | G0} Q(s_t, g'))."""
@@ -113,11 +149,11 @@ class HighLevelDQN:
         if callable(target_mask):
             target_mask = target_mask(~avail)
         with torch.no_grad():
-            q_next_t = self.q_target(b["next_obs"])
+            q_next_t = self._q(self.q_target, b["next_obs"])
             mask = avail if target_mask is None else avail & torch.as_tensor(target_mask).bool()
             mask = torch.where(mask.any(-1, keepdim=True), mask, avail)   # empty Ĝt ∩ avail: fall back to G0
             if self.cfg.double_q:
-                q_next_online = self.q(b["next_obs"])
+                q_next_online = self._q(self.q, b["next_obs"])
                 neg = torch.finfo(q_next_online.dtype).min
                 a_star = torch.where(mask, q_next_online, torch.full_like(q_next_online, neg)).argmax(-1)
                 boot = q_next_t.gather(1, a_star[:, None]).squeeze(1)
@@ -125,7 +161,7 @@ class HighLevelDQN:
             else:
                 boot = masked_max(q_next_t, mask)
             y = b["reward"] + b["discount"] * boot
-        q_taken = self.q(b["obs"]).gather(1, b["goal"][:, None]).squeeze(1)
+        q_taken = self._q(self.q, b["obs"]).gather(1, b["goal"][:, None]).squeeze(1)
         loss = 0.5 * (y - q_taken).pow(2).mean()            # Eq. 2
         self.opt.zero_grad()
         loss.backward()

@@ -134,6 +134,10 @@ class LoopConfig:
     # without its key, a goal behind a closed door). The counts go with the high level in a transfer
     # and a revision
     initiation_tries: int = 0
+    # True: the high level never chooses, and its TD targets never bootstrap from, a sub-goal that the
+    # env's subgoal_possible() says can no longer hold in this episode (another key, where nothing can
+    # be dropped, and the door it would open); envs without it offer every sub-goal not yet achieved
+    exclude_impossible: bool = False
 
     def __post_init__(self):
         if self.filter_refresh not in ("option", "episode"):
@@ -190,6 +194,8 @@ class HRLLoop:
         # (h-DQN, a scripted or continuous low level) every sub-goal weighs alike, as with "uniform"
         self._weighs_low = (config.low_goal_weight != "uniform" and isinstance(low, GoalDQN)
                             and isinstance(subgoal_filter, CriticFilter))
+        self._possible = (getattr(env.unwrapped, "subgoal_possible", None)
+                          if config.exclude_impossible else None)
         self._ghat: np.ndarray | None = None    # Ĝt as the loop sees it (refreshed per option or per episode)
         self._ghat_given: np.ndarray | None = None   # the achieved set Ĝt was last read with
         self._break_cycles = (config.low_break_cycles and low.learns
@@ -227,8 +233,17 @@ class HRLLoop:
             mask = self.filter.allowed()
         return None if mask is None else torch.as_tensor(mask)
 
+    def _open(self, achieved: np.ndarray) -> np.ndarray:
+        """The sub-goals the high level may choose from now: those not yet achieved (and, with
+        ``exclude_impossible``, still possible); every one where none is left."""
+        base = ~achieved
+        if self._possible is not None:
+            possible = base & self._possible()
+            base = possible if possible.any() else base
+        return base if base.any() else np.ones_like(achieved)
+
     def _allowed(self, achieved: np.ndarray, filter_eps: float) -> np.ndarray:
-        base = ~achieved if (~achieved).any() else np.ones_like(achieved)
+        base = self._open(achieved)
         if (self.cfg.filter_refresh == "option" or self._ghat_given is None
                 or (self.cfg.filter_given_achieved and not np.array_equal(achieved, self._ghat_given))):
             self._read_filter(achieved)
@@ -314,7 +329,7 @@ class HRLLoop:
                     self.initiation.record(started_at, g, bool(achieved[g]))
             done = terminated or truncated
             if train:
-                available = ~achieved if (~achieved).any() else np.ones_like(achieved)
+                available = self._open(achieved)
                 discount = 0.0 if terminated else cfg.gamma ** k
                 self.high.store(s0, g, R, obs, discount, available)
                 if self.high.ready():

@@ -86,8 +86,8 @@ def _last_layer(state: dict[str, torch.Tensor]) -> tuple[str, str]:
     return f"{last}.weight", f"{last}.bias"
 
 
-# the two forms of a learned grid low level (GoalDQN), as a refusal names them
-LOW_FORM = {True: "one network over the sub-goals' features", False: "one head per sub-goal"}
+# the two forms of a learned grid level (GoalDQN, HighLevelDQN), as a refusal names them
+LEVEL_FORM = {True: "one network over the sub-goals' features", False: "one head per sub-goal"}
 
 
 def low_is_shared(state: dict[str, Any], n_actions: int) -> bool:
@@ -95,6 +95,13 @@ def low_is_shared(state: dict[str, Any], n_actions: int) -> bool:
     rather than one output head per sub-goal."""
     outputs = state["q"][_last_layer(state["q"])[1]].shape[0]
     return outputs == int(n_actions) and state["buffer"]["data"]["before"].shape[1] > 1
+
+
+def high_is_shared(state: dict[str, Any]) -> bool:
+    """Whether a HighLevelDQN state is one network over the sub-goals' rows (one output) rather than
+    one output per sub-goal."""
+    outputs = state["q"][_last_layer(state["q"])[1]].shape[0]
+    return outputs == 1 and state["buffer"]["data"]["available"].shape[1] > 1
 
 
 def remap_net(old: dict[str, torch.Tensor], fresh: dict[str, torch.Tensor], index: Sequence[int | None],
@@ -216,11 +223,21 @@ def remap_high_state(old: dict[str, Any], fresh: dict[str, Any], fresh_params: S
     """A :class:`~hubsgo_ppl.agents.high_level.HighLevelDQN` state for the new sub-goal set ``index``
     (module docstring). ``keep_run`` False: only the networks (a new run)."""
     out = dict(fresh)
-    out["q"] = remap_net(old["q"], fresh["q"], index, 1, "high level")
-    out["q_target"] = remap_net(old["q_target"], fresh["q_target"], index, 1, "high level (target)")
+    shared = high_is_shared(fresh)
+    if high_is_shared(old) != shared:
+        raise TransferError(f"high level: the source has {LEVEL_FORM[not shared]}, this run {LEVEL_FORM[shared]}; "
+                            f"train both with the same high.goal_features")
+    for key in ("q", "q_target"):
+        if shared:                          # no per-sub-goal outputs: the networks whole
+            if any(old[key][k].shape != v.shape for k, v in fresh[key].items()):
+                raise TransferError("high level: the source reads sub-goal rows of another size; "
+                                    "leave out the high level (--transfer critic,low)")
+            out[key] = copy.deepcopy(old[key])
+        else:
+            out[key] = remap_net(old[key], fresh[key], index, 1, "high level" + (" (target)" if key == "q_target" else ""))
     if not keep_run:
         return out
-    out["opt"] = _remap_adam(old["opt"], fresh_params, index, 1)
+    out["opt"] = copy.deepcopy(old["opt"]) if shared else _remap_adam(old["opt"], fresh_params, index, 1)
     out["updates"] = int(old["updates"])
     buf, new_buf = old["buffer"], copy.deepcopy(fresh["buffer"])
     goal_map = {i: j for j, i in enumerate(index) if i is not None}
@@ -268,7 +285,7 @@ def remap_low_state(old: dict[str, Any], fresh: dict[str, Any], low: Any, index:
     outputs = old["q"][_last_layer(old["q"])[1]].shape[0]
     shared = getattr(low, "features", None) is not None      # one network for every sub-goal
     if (outputs != block) if shared else low_is_shared(old, block):
-        raise TransferError(f"low level: the source has {LOW_FORM[not shared]}, this run {LOW_FORM[shared]}; "
+        raise TransferError(f"low level: the source has {LEVEL_FORM[not shared]}, this run {LEVEL_FORM[shared]}; "
                             f"train both with the same low.goal_features")
     if not shared and outputs != n_old * block:
         raise TransferError(f"low level: the source acts with {outputs // max(n_old, 1)} actions, this task with {block}")

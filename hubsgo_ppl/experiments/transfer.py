@@ -29,11 +29,12 @@ from typing import Any, Sequence
 
 import torch
 
+from ..agents.high_level import HighLevelConfig
 from ..agents.low_level import GoalDQNConfig
 from ..envs import get_task
 from ..envs.subset import make_subset
 from .io import CheckpointError, load_checkpoint
-from .remap import (LOW_FORM, TransferError, low_is_shared, name_index, remap_critic_state,  # noqa: F401
+from .remap import (LEVEL_FORM, TransferError, high_is_shared, low_is_shared, name_index, remap_critic_state,  # noqa: F401
                     remap_high_state, remap_low_state, remap_rows, revise_agent_state)
 
 __all__ = ["PARTS", "SCHEDULES", "TRANSFER_DEFAULTS", "TransferError", "TransferPlan", "name_index", "remap_rows", "remap_critic_state",
@@ -147,16 +148,17 @@ def plan_transfer(resolved: dict[str, Any], source: str | Path,
         if "low" in chosen and src_n != dst_n:
             raise TransferError(f"--init-from {src_dir}: action counts differ: {src['task']} has {src_n} actions, "
                                 f"{resolved['task']} {dst_n}; leave out the low level (--transfer critic,high)")
-        if "low" in chosen:
-            low = ckpt["agent"].get("low")
-            goal_dqn = isinstance(low, dict) and "q" in low and "buffer" in low
-            src_shared = goal_dqn and low_is_shared(low, src_n)
-            dst_shared = dst_mode == "egocentric" and bool(
-                resolved["hyper"].get("low", {}).get("goal_features", GoalDQNConfig.goal_features))
-            if goal_dqn and src_shared != dst_shared:
-                raise TransferError(f"--init-from {src_dir}: the low level of the source run has {LOW_FORM[src_shared]}, "
-                                    f"this run {LOW_FORM[dst_shared]}; set --set low.goal_features="
-                                    f"{str(src_shared).lower()} or leave out --transfer low")
+        for part, default, is_shared in (("high", HighLevelConfig.goal_features, high_is_shared),
+                                         ("low", GoalDQNConfig.goal_features, lambda s: low_is_shared(s, src_n))):
+            state = ckpt["agent"].get(part) if part in chosen else None
+            if not (isinstance(state, dict) and "q" in state and "buffer" in state):    # not a grid DQN
+                continue
+            src_shared = is_shared(state)
+            dst_shared = dst_mode == "egocentric" and bool(resolved["hyper"].get(part, {}).get("goal_features", default))
+            if src_shared != dst_shared:
+                raise TransferError(f"--init-from {src_dir}: the {part} level of the source run has {LEVEL_FORM[src_shared]}, "
+                                    f"this run {LEVEL_FORM[dst_shared]}; set --set {part}.goal_features="
+                                    f"{str(src_shared).lower()} or leave out --transfer {part}")
         for part in ("high", "low"):
             a = list(src["hyper"].get(part, {}).get("hidden", []))
             b = list(resolved["hyper"].get(part, {}).get("hidden", []))

@@ -243,3 +243,26 @@ def test_a_revision_keeps_a_shared_low_level_whole_and_drops_the_dropped_goals_f
                            torch.as_tensor(before["buffer"]["data"][k])[:, kept])
     train(RunConfig(task="keydoor_incorrect"), run, resume=True, progress=False)
     assert load_checkpoint(run / "checkpoint.pt")["env_steps"] >= STEPS
+
+
+def test_a_revision_keeps_a_high_level_over_rows_whole_and_renumbers_its_buffer_by_name(tmp_path):
+    spec = _spec(tmp_path / "initial.yaml", "initial", FIVE + CORNERS, EDGES)
+    run = tmp_path / "run"
+    train(RunConfig(task="keydoor_incorrect", model=str(spec), steps=STEPS, seed=1,
+                    overrides=[*TINY, "env.obs_mode=egocentric", "high.goal_features=true"]),
+          run, progress=False, stop_at=PAUSE)
+    before = load_checkpoint(run / "checkpoint.pt")["agent"]["high"]
+    apply_revision(run, _spec(tmp_path / "five.yaml", "five", FIVE, EDGES))
+    after = load_checkpoint(run / "checkpoint.pt")["agent"]["high"]
+    for net in ("q", "q_target"):       # one network for every sub-goal: nothing to add or drop
+        assert after[net].keys() == before[net].keys()
+        assert all(torch.equal(after[net][k], before[net][k]) for k in before[net])
+    old, new = before["buffer"]["data"], after["buffer"]["data"]
+    rows = np.flatnonzero([(FIVE + CORNERS)[int(g)] in FIVE for g in old["goal"][:before["buffer"]["size"]]])
+    assert after["buffer"]["size"] == len(rows) > 0
+    names = [(FIVE + CORNERS)[int(g)] for g in old["goal"][rows]]   # the transitions kept, oldest first
+    assert [FIVE[int(g)] for g in new["goal"][:len(rows)]] == names
+    kept = [(FIVE + CORNERS).index(g) for g in FIVE]
+    np.testing.assert_array_equal(np.asarray(new["available"][:len(rows)]), np.asarray(old["available"][rows][:, kept]))
+    train(RunConfig(task="keydoor_incorrect"), run, resume=True, progress=False)
+    assert load_checkpoint(run / "checkpoint.pt")["env_steps"] >= STEPS

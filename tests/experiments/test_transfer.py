@@ -223,3 +223,25 @@ def test_an_egocentric_low_level_is_one_network_that_transfers_whole_and_refuses
                                              "features, this run one head per sub-goal; set --set "
                                              "low.goal_features=true or leave out --transfer low"), err
     assert not heads.exists()
+
+
+def test_a_high_level_over_rows_transfers_whole_and_refuses_one_output_per_subgoal(tmp_path, capsys):
+    rows = TINY + ["env.obs_mode=egocentric", "high.goal_features=true"]
+    src = tmp_path / "src"
+    train(RunConfig(task="vault", steps=500, seed=0, overrides=rows), src, progress=False)
+    high = load_checkpoint(src / "checkpoint.pt")["agent"]["high"]
+    assert list(high["q"].values())[-1].shape == (1,)      # one value per row, no output per sub-goal
+    out = tmp_path / "dst"
+    train(RunConfig(task="vault_moved", steps=500, seed=1, overrides=rows, init_from=str(src), transfer=["high"]),
+          out, progress=False, max_episodes=0)
+    got = load_checkpoint(out / "checkpoint.pt")["agent"]["high"]
+    for net in ("q", "q_target"):
+        assert all(torch.equal(got[net][k], v) for k, v in high[net].items())
+    heads = tmp_path / "heads"
+    assert main(["train", "vault_moved", "--init-from", str(src), "--transfer", "high", "--out", str(heads),
+                 "--no-progress", *CLI_TINY, "--set", "env.obs_mode=egocentric"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].endswith("the high level of the source run has one network over the sub-goals' "
+                                             "features, this run one head per sub-goal; set --set "
+                                             "high.goal_features=true or leave out --transfer high"), err
+    assert not heads.exists()

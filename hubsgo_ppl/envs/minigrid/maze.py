@@ -316,6 +316,25 @@ class MazeEnv(MiniGridEnv):
                 out[i] = self._doors[idx].is_open
         return out
 
+    def subgoal_possible(self) -> np.ndarray:
+        """Which catalogue predicates can still come to hold in this episode: bool array (N,).
+
+        Without a ``drop`` action an object once picked up stays held, so carrying another one, and
+        opening a locked door with another key, can no longer happen. Everything else counts as
+        possible (a cell behind a closed door may still be reached once it opens)."""
+        out = np.ones(len(self._preds), dtype=bool)
+        c = self.carrying
+        if c is None or "drop" in self.action_names:
+            return out
+        carried = self._carry_index[(c.type, c.color)]
+        for i, (code, _, idx) in enumerate(self._preds):
+            if code == 1:
+                out[i] = carried == idx + 1
+            elif code == 2:
+                door = self._doors[idx]
+                out[i] = door.is_open or not door.is_locked or (c.type == "key" and c.color == door.color)
+        return out
+
     def subgoal_target(self, i: int) -> tuple[int, int]:
         """The cell the low level should reach (``at``/``goal``) or face (a key or a door)."""
         if not 0 <= int(i) < len(self._preds):
@@ -405,6 +424,7 @@ class MazeEnv(MiniGridEnv):
             return torch.cat([base, obs[..., own], kind.expand(*obs.shape[:-1], n_goals, 3)], dim=-1)
 
         feat.dim = int(shared.numel()) + 6
+        feat.flag = int(shared.numel())     # the column of a row's own achievement flag
         return feat
 
     def symbolic_state(self) -> MazeState:

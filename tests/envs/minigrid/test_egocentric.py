@@ -170,6 +170,7 @@ def test_each_subgoal_row_holds_its_own_flag_offset_and_kind_and_nothing_else_of
             shared, own, kind = rows[i, :-6], rows[i, -6:-3], rows[i, -3:]
             np.testing.assert_array_equal(shared, np.concatenate([[carry], achieved, window.reshape(-1)]))
             np.testing.assert_array_equal(own, [achieved[i], *offsets[i]])
+            assert rows[i, f_full.flag] == achieved[i]
             assert kind.tolist() == [float(k == kinds.get(name, 0)) for k in range(3)]
         # a subset's rows are the full catalogue's rows of the same names, in the subset's order
         order = [names.index(s) for s in sub.unwrapped.subgoal_names]
