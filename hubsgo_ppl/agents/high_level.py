@@ -50,7 +50,8 @@ class HighLevelConfig:
     grad_clip: float = 10.0
     # true, where the env offers subgoal_features (egocentric mazes): one network reads each sub-goal's
     # row, extended by whether a sub-goal the spec joins to it by a positive edge, and by a negative
-    # one, is achieved, and gives Q(s, g); nothing in a row names g. false: one output per sub-goal
+    # one, is achieved, and gives Q(s, g); nothing in a row names g (h-DQN has no spec: both columns
+    # stay 0). false: one output per sub-goal
     goal_features: bool = False
 
 
