@@ -87,6 +87,9 @@ def test_console_script_is_installed():
     ("env.nonsense=3", ["cannot be built with --set env.nonsense=3", "'nonsense'"]),       # caught at build
     ("loop.schedule_from=later", ["cannot be built with --set loop.schedule_from=later", "schedule_from"]),
     ("loop.outcome_window=-1", ["loop.outcome_window must be a positive integer, got -1"]),
+    # the symbolic observation names absolute cells: no per-sub-goal rows to share
+    ("low.goal_features=true", ["low.goal_features=true needs the env's subgoal_features", "env.obs_mode=egocentric"]),
+    ("high.goal_features=true", ["high.goal_features=true needs the env's subgoal_features", "env.obs_mode=egocentric"]),
 ])
 @pytest.mark.parametrize("agent", ["hubsgo", "hdqn"])
 def test_bad_set_key_one_line_naming_section_and_valid_keys(setting, needles, agent, capsys, tmp_path):

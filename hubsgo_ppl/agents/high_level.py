@@ -98,6 +98,9 @@ class HighLevelDQN:
         self.n_goals = n_goals
         self.rng = rng
         # features(obs) -> (..., N, F): per-sub-goal rows (linked_rows), read by one shared network
+        if config.goal_features and features is None:
+            raise ValueError("high.goal_features=true needs the env's subgoal_features (egocentric mazes); "
+                             "set env.obs_mode=egocentric or high.goal_features=false")
         self.features = features if config.goal_features else None
         if self.features is not None:
             self.q = mlp(self.features.dim, config.hidden, 1, generator)

@@ -58,6 +58,9 @@ class GoalDQN(LowLevelBase):
         self.n_goals, self.n_actions = n_goals, n_actions
         self.rng = rng
         # features(obs) -> (..., N, F): the env's per-sub-goal rows, read by one shared network
+        if config.goal_features and features is None:
+            raise ValueError("low.goal_features=true needs the env's subgoal_features (egocentric mazes); "
+                             "set env.obs_mode=egocentric or low.goal_features=false")
         self.features = features if config.goal_features else None
         if self.features is not None:
             self.q = mlp(self.features.dim, config.hidden, n_actions, generator)
