@@ -218,6 +218,19 @@ def remap_critic_state(old: dict[str, Any], fresh_critic: Any, keep_run: bool = 
 # -- the high and the low level -----------------------------------------------------------------------
 
 
+def _whole_networks(old: dict[str, Any], fresh: dict[str, Any], what: str, rows: str,
+                    others: str) -> dict[str, Any]:
+    """A level with no per-sub-goal outputs (one network over the sub-goals' rows): its networks whole,
+    refused where the source reads rows of another size."""
+    out = {}
+    for key in ("q", "q_target"):
+        if any(old[key][k].shape != v.shape for k, v in fresh[key].items()):
+            raise TransferError(f"{what}: the source reads {rows} of another size; "
+                                f"leave out the {what} (--transfer {others})")
+        out[key] = copy.deepcopy(old[key])
+    return out
+
+
 def remap_high_state(old: dict[str, Any], fresh: dict[str, Any], fresh_params: Sequence[torch.Tensor],
                      index: Sequence[int | None], keep_run: bool = True) -> dict[str, Any]:
     """A :class:`~hubsgo_ppl.agents.high_level.HighLevelDQN` state for the new sub-goal set ``index``
@@ -227,14 +240,11 @@ def remap_high_state(old: dict[str, Any], fresh: dict[str, Any], fresh_params: S
     if high_is_shared(old) != shared:
         raise TransferError(f"high level: the source has {LEVEL_FORM[not shared]}, this run {LEVEL_FORM[shared]}; "
                             f"train both with the same high.goal_features")
-    for key in ("q", "q_target"):
-        if shared:                          # no per-sub-goal outputs: the networks whole
-            if any(old[key][k].shape != v.shape for k, v in fresh[key].items()):
-                raise TransferError("high level: the source reads sub-goal rows of another size; "
-                                    "leave out the high level (--transfer critic,low)")
-            out[key] = copy.deepcopy(old[key])
-        else:
-            out[key] = remap_net(old[key], fresh[key], index, 1, "high level" + (" (target)" if key == "q_target" else ""))
+    if shared:
+        out.update(_whole_networks(old, fresh, "high level", "sub-goal rows", "critic,low"))
+    else:
+        out["q"] = remap_net(old["q"], fresh["q"], index, 1, "high level")
+        out["q_target"] = remap_net(old["q_target"], fresh["q_target"], index, 1, "high level (target)")
     if not keep_run:
         return out
     out["opt"] = copy.deepcopy(old["opt"]) if shared else _remap_adam(old["opt"], fresh_params, index, 1)
@@ -290,12 +300,8 @@ def remap_low_state(old: dict[str, Any], fresh: dict[str, Any], low: Any, index:
     if not shared and outputs != n_old * block:
         raise TransferError(f"low level: the source acts with {outputs // max(n_old, 1)} actions, this task with {block}")
     out = dict(fresh)
-    if shared:                              # no per-sub-goal outputs: the networks whole
-        for key in ("q", "q_target"):
-            if any(old[key][k].shape != v.shape for k, v in fresh[key].items()):
-                raise TransferError("low level: the source reads sub-goal features of another size; "
-                                    "leave out the low level (--transfer critic,high)")
-            out[key] = old[key]
+    if shared:
+        out.update(_whole_networks(old, fresh, "low level", "sub-goal features", "critic,high"))
     else:
         out["q"] = remap_net(old["q"], fresh["q"], index, block, "low level")
         out["q_target"] = remap_net(old["q_target"], fresh["q_target"], index, block, "low level (target)")
