@@ -137,6 +137,8 @@ def _as_flags(settings: dict) -> str:
     for key, value in settings.items():
         if key == "overrides":
             flags += [f"--set {v}" for v in value]
+        elif key == "source_overrides":
+            flags += [f"--source-set {v}" for v in value]
         elif value is True:
             flags.append(f"--{key.replace('_', '-')}")
         elif value not in (None, False):

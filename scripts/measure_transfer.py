@@ -17,7 +17,7 @@ Per arm it reports, as mean ± standard error over the seeds, the env steps unti
 rate (20 episodes) first reaches 90% (runs that never reach it are counted, not averaged) and the
 success rate over the last 20 episodes. Everything goes under ``--out``: the runs, ``results.csv``
 (one row per target run) and ``summary.md``. Re-running skips finished runs, so ``--out`` remembers its
-settings (``settings.json``: ``--steps``, ``--set``, ``--restart-schedules``) and refuses other ones;
+settings (``settings.json``: ``--steps``, ``--set``, ``--source-set``, ``--restart-schedules``) and refuses other ones;
 more seeds, sources or arms may be added. To reuse source runs under other settings, copy their
 folders into a new ``--out``.
 
@@ -45,9 +45,10 @@ RESTARTED = {"all_restarted"}
 
 
 def one(source: str, seed: int, out: Path, steps: int | None, overrides: list[str],
-        restart: bool = False, arms: tuple[str, ...] = tuple(ARMS)) -> list[dict]:
+        restart: bool = False, arms: tuple[str, ...] = tuple(ARMS), source_overrides: tuple[str, ...] = ()) -> list[dict]:
     """The source run of one (pair, seed) and the target ``arms``; one result row per arm (``restart``:
-    every arm with its schedules started afresh, so ``all_restarted`` is left out)."""
+    every arm with its schedules started afresh, so ``all_restarted`` is left out). ``source_overrides``
+    apply to the source run only, after ``overrides``."""
     import torch
 
     from hubsgo_ppl.experiments.io import load_checkpoint
@@ -69,7 +70,7 @@ def one(source: str, seed: int, out: Path, steps: int | None, overrides: list[st
             train(cfg, run, progress=False)
 
     src = base / "source"
-    ensure(src, RunConfig(task=source, seed=seed, steps=steps, overrides=overrides))
+    ensure(src, RunConfig(task=source, seed=seed, steps=steps, overrides=[*overrides, *source_overrides]))
     rows = []
     for arm, parts in ARMS.items():
         if (restart and arm in RESTARTED) or arm not in arms:
@@ -97,6 +98,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--sources", nargs="+", default=DEFAULT_SOURCES, choices=list(PAIRS),
                    help="the source tasks of the pairs to run (default: %(default)s)")
     p.add_argument("--arms", nargs="+", default=list(ARMS), choices=list(ARMS), help="the target arms to run")
+    p.add_argument("--source-set", dest="source_overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="a hyperparameter override for the source runs only, after --set (repeatable), "
+                        "e.g. env.start=room")
     p.add_argument("--restart-schedules", action="store_true",
                    help="every transfer arm starts its schedules afresh (`hubsgo train --restart-schedules`)")
     args = p.parse_args(argv)
@@ -105,8 +109,11 @@ def main(argv: list[str] | None = None) -> int:
         args.sources, args.seeds, args.steps, overrides = ["keydoor"], args.seeds[:1], 1_000, SMOKE + overrides
     out = output_dir(args.out)
     guard_settings(out, "measure_transfer", {"steps": args.steps, "overrides": overrides,
-                                             "restart_schedules": args.restart_schedules})
-    jobs = [(s, seed, out, args.steps, overrides, args.restart_schedules, tuple(args.arms))
+                                             "restart_schedules": args.restart_schedules,
+                                             **({"source_overrides": args.source_overrides}
+                                                if args.source_overrides else {})})
+    jobs = [(s, seed, out, args.steps, overrides, args.restart_schedules, tuple(args.arms),
+             tuple(args.source_overrides))
             for s in args.sources for seed in args.seeds]
     return finish(run_jobs(one, jobs, args.workers), out, summarise)
 

@@ -85,6 +85,7 @@ def test_console_script_is_installed():
     ("loop=3", ["'loop' is a section"]),
     ("nosection.x=3", ["unknown section 'nosection'"]),
     ("env.nonsense=3", ["cannot be built with --set env.nonsense=3", "'nonsense'"]),       # caught at build
+    ("env.start=anywhere", ["cannot be built with --set env.start=anywhere", "use 'cell' or 'room'"]),
     ("loop.schedule_from=later", ["cannot be built with --set loop.schedule_from=later", "schedule_from"]),
     ("loop.outcome_window=-1", ["loop.outcome_window must be a positive integer, got -1"]),
     # the symbolic observation names absolute cells: no per-sub-goal rows to share

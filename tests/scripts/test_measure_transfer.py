@@ -56,3 +56,22 @@ def test_restart_and_arms_restrict_what_is_run(tmp_path, recorded):
     assert [r["arm"] for r in rows] == ["scratch", "all"]          # all_restarted would repeat all
     assert set(recorded) == {"source", "scratch", "all"}
     assert recorded["all"].restart_schedules and recorded["all"].transfer == ["critic", "high", "low"]
+
+
+def test_source_overrides_reach_the_source_run_only(tmp_path, recorded):
+    measure_transfer.one("vault", 1, tmp_path, 2_000, ["env.obs_mode=egocentric"], arms=("scratch", "all"),
+                         source_overrides=("env.start=room",))
+    assert recorded["source"].overrides == ["env.obs_mode=egocentric", "env.start=room"]
+    assert recorded["scratch"].overrides == recorded["all"].overrides == ["env.obs_mode=egocentric"]
+
+
+def test_an_out_folder_remembers_its_source_overrides(tmp_path, monkeypatch):
+    ran = []
+    monkeypatch.setattr(measure_transfer, "run_jobs", lambda one, jobs, workers: ran.append(jobs) or [])
+    monkeypatch.setattr(measure_transfer, "finish", lambda rows, out, summarise: 0)
+    out = tmp_path / "out"
+    argv = ["--out", str(out), "--steps", "900", "--seeds", "0", "--sources", "vault"]
+    assert measure_transfer.main([*argv, "--source-set", "env.start=room"]) == 0
+    assert ran[0][0][-1] == ("env.start=room",)
+    with pytest.raises(SystemExit, match="holds runs made with --steps 900 --source-set env.start=room, not --steps 900;"):
+        measure_transfer.main(argv)

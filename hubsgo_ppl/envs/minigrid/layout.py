@@ -102,6 +102,9 @@ class MazeOptions(StrictModel):
     legend: dict[str, LegendEntry] = Field(default_factory=dict)
     max_steps: int | None = Field(default=None, gt=0, description="truncation; default 4*W*H")
     start_dir: Literal["right", "down", "left", "up", "random"] = "right"
+    start: Literal["cell", "room"] = Field(
+        default="cell", description="cell: every episode starts on A; room: on a free cell of A's room "
+                                    "(reachable from A without crossing a door, object or lava; seeded by reset)")
     actions: list[str] = Field(default_factory=lambda: ["left", "right", "forward", "pickup", "toggle"])
     obs_mode: Literal["symbolic", "image", "egocentric"] = "symbolic"
     mission: str = "reach the goal"
@@ -158,6 +161,19 @@ class Layout:
     @property
     def carriables(self) -> tuple[MazeObject, ...]:
         return tuple(o for o in self.objects if o.type in CARRIABLE)
+
+    def start_room(self) -> tuple[tuple[int, int], ...]:
+        """The free cells an agent on ``agent_start`` reaches by walking: no wall, lava, door, object or
+        goal on them, 4-connected to ``agent_start`` (first), in breadth-first order."""
+        blocked = self.walls | self.lava | {o.cell for o in self.objects} | {self.goal}
+        seen, queue = {self.agent_start}, [self.agent_start]
+        for x, y in queue:
+            for cell in ((x + 1, y), (x, y + 1), (x - 1, y), (x, y - 1)):
+                if (cell not in seen and cell not in blocked
+                        and 0 <= cell[0] < self.width and 0 <= cell[1] < self.height):
+                    seen.add(cell)
+                    queue.append(cell)
+        return tuple(queue)
 
     def object_at(self, cell: tuple[int, int]) -> MazeObject | None:
         for o in self.objects:

@@ -132,13 +132,19 @@ class MazeEnv(MiniGridEnv):
         catalogue: path to the task's catalogue YAML (or a loaded :class:`Catalogue`).
         obs_mode: ``"symbolic"`` or ``"image"``; overrides ``options.obs_mode``.
         max_steps: overrides ``options.max_steps``.
+        start: ``"cell"`` or ``"room"``; overrides ``options.start`` (``room``: each episode starts on a
+            free cell of the start's room, drawn by the seeded reset, so that the low level meets its
+            sub-goals from many places, e.g. in a run meant to be transferred).
         render_mode: ``None``, ``"rgb_array"`` or ``"human"`` (MiniGrid's renderer).
         **kwargs: passed to :class:`MiniGridEnv` (``tile_size``, ``screen_size``, ...).
     """
 
     def __init__(self, catalogue: str | Path | Catalogue, obs_mode: str | None = None,
-                 max_steps: int | None = None, render_mode: str | None = None, **kwargs: Any):
+                 max_steps: int | None = None, render_mode: str | None = None, start: str | None = None,
+                 **kwargs: Any):
         spec = load_maze_spec(catalogue)
+        if start is not None and start not in ("cell", "room"):
+            raise SpecError(f"{spec.source}: start={start!r} is not supported; use 'cell' or 'room'")
         if obs_mode is not None and obs_mode not in ("symbolic", "image", "egocentric"):
             raise SpecError(f"{spec.source}: obs_mode={obs_mode!r} is not supported; use 'symbolic', 'image' "
                             f"or 'egocentric'")
@@ -153,6 +159,8 @@ class MazeEnv(MiniGridEnv):
                          render_mode=render_mode, **kwargs)
         self.mission = spec.options.mission
         self.obs_mode = obs_mode or spec.options.obs_mode
+        # the cells an episode may start on: the layout's A, or every free cell of A's room
+        self._starts = lay.start_room() if (start or spec.options.start) == "room" else (lay.agent_start,)
         self._action_map = tuple(Actions[a] for a in spec.options.actions)
         self.action_space = spaces.Discrete(len(self._action_map))
         self.action_names = list(spec.options.actions)
@@ -217,10 +225,11 @@ class MazeEnv(MiniGridEnv):
                 obj = Key(o.color) if o.type == "key" else Ball(o.color)
                 self._carriables.append(obj)
             self.put_obj(obj, *o.cell)
-        self.agent_pos = lay.agent_start
         sd = self.spec_maze.options.start_dir
         # the only randomness a catalogue can ask for; drawn from MiniGrid's seeded np_random
         self.agent_dir = int(self.np_random.integers(0, 4)) if sd == "random" else DIRECTIONS[sd]
+        self.agent_pos = (self._starts[int(self.np_random.integers(len(self._starts)))]
+                          if len(self._starts) > 1 else lay.agent_start)
         self.mission = self.spec_maze.options.mission
 
     def gen_obs(self) -> np.ndarray:

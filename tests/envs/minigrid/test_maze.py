@@ -136,6 +136,42 @@ def test_bad_constructor_arguments():
         MazeEnv(catalogue=cat, obs_mode="rgb")
     with pytest.raises(SpecError, match="max_steps=0 must be a positive int"):
         MazeEnv(catalogue=cat, max_steps=0)
+    with pytest.raises(SpecError, match="start='anywhere' is not supported; use 'cell' or 'room'"):
+        MazeEnv(catalogue=cat, start="anywhere")
+
+
+def _walk_from(lay, cell, seen):
+    # every free cell 4-connected to `cell`, found by flood fill over the ASCII rows themselves
+    x, y = cell
+    if (x, y) in seen or lay.rows[y][x] not in ".A":
+        return
+    seen.add((x, y))
+    for nxt in ((x + 1, y), (x - 1, y), (x, y + 1), (x, y - 1)):
+        _walk_from(lay, nxt, seen)
+
+
+def _start_cell(env, seed):
+    env.reset(seed=seed)
+    return tuple(env.unwrapped.agent_pos)
+
+
+@pytest.mark.parametrize("task", ["keydoor", "vault", "threepair"])
+def test_a_room_start_draws_every_free_cell_of_the_start_room_and_only_those(task):
+    lay = make(task).unwrapped.spec_maze.layout
+    room: set = set()
+    _walk_from(lay, lay.agent_start, room)
+    assert set(lay.start_room()) == room and lay.start_room()[0] == lay.agent_start
+    # the room ends at the first wall with a door: vault's start room is x 1-5 less its two keys
+    if task == "vault":
+        assert room == {(x, y) for x in range(1, 6) for y in range(1, 12)} - {(2, 3), (2, 9)}
+    env = make(task, start="room")
+    drawn = [_start_cell(env, s) for s in range(300)]
+    assert set(drawn) <= room and len(set(drawn)) > len(room) // 2
+    again = make(task, start="room")
+    assert drawn[:20] == [_start_cell(again, s) for s in range(20)]
+    # the default starts on A in every episode
+    fixed = make(task)
+    assert {_start_cell(fixed, s) for s in range(20)} == {lay.agent_start}
 
 
 @pytest.mark.parametrize("task", MINIGRID_TASKS)
