@@ -14,7 +14,8 @@ char  meaning
 ====  ===========================================================================================
 ``#``  wall
 ``.``  empty floor (a space also works)
-``A``  agent start (exactly one; its direction comes from ``options.start_dir``)
+``A``  agent start (exactly one; its direction comes from ``options.start_dir``, ``options.start``
+       may spread it over A's room)
 ``G``  goal (exactly one); reaching it ends the episode with the reward
 ``~``  lava (ends the episode with reward 0)
 other  whatever ``options.legend`` maps it to, e.g. ``y: {type: key, color: yellow}``,
@@ -31,6 +32,7 @@ Minigrid ``options`` (all validated, unknown keys rejected)::
     legend: {y: {type: key, color: yellow}, Y: {type: door, color: yellow, locked: true}}
     max_steps: 2000                       # default 4 * width * height
     start_dir: right                      # right | down | left | up | random (seeded by reset)
+    start: cell                           # cell: on A | room: a free cell of A's room (seeded by reset)
     actions: [left, right, forward, pickup, toggle]   # subset of MiniGrid's actions, in this order
     obs_mode: symbolic                    # symbolic | image | egocentric
     mission: "reach the green goal"

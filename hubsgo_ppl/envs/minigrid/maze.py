@@ -226,7 +226,8 @@ class MazeEnv(MiniGridEnv):
                 self._carriables.append(obj)
             self.put_obj(obj, *o.cell)
         sd = self.spec_maze.options.start_dir
-        # the only randomness a catalogue can ask for; drawn from MiniGrid's seeded np_random
+        # the randomness a catalogue can ask for (start_dir: random, start: room); drawn from MiniGrid's
+        # seeded np_random
         self.agent_dir = int(self.np_random.integers(0, 4)) if sd == "random" else DIRECTIONS[sd]
         self.agent_pos = (self._starts[int(self.np_random.integers(len(self._starts)))]
                           if len(self._starts) > 1 else lay.agent_start)
