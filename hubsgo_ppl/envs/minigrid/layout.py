@@ -166,13 +166,13 @@ class Layout:
 
     def start_room(self) -> tuple[tuple[int, int], ...]:
         """The free cells an agent on ``agent_start`` reaches by walking: no wall, lava, door, object or
-        goal on them, 4-connected to ``agent_start`` (first), in breadth-first order."""
+        goal on them, 4-connected to ``agent_start`` (first), in breadth-first order. The border is wall
+        (parse_layout checks it), so the walk never leaves the grid."""
         blocked = self.walls | self.lava | {o.cell for o in self.objects} | {self.goal}
         seen, queue = {self.agent_start}, [self.agent_start]
         for x, y in queue:
             for cell in ((x + 1, y), (x, y + 1), (x - 1, y), (x, y - 1)):
-                if (cell not in seen and cell not in blocked
-                        and 0 <= cell[0] < self.width and 0 <= cell[1] < self.height):
+                if cell not in seen and cell not in blocked:
                     seen.add(cell)
                     queue.append(cell)
         return tuple(queue)

@@ -229,8 +229,9 @@ class MazeEnv(MiniGridEnv):
         # the randomness a catalogue can ask for (start_dir: random, start: room); drawn from MiniGrid's
         # seeded np_random
         self.agent_dir = int(self.np_random.integers(0, 4)) if sd == "random" else DIRECTIONS[sd]
-        self.agent_pos = (self._starts[int(self.np_random.integers(len(self._starts)))]
-                          if len(self._starts) > 1 else lay.agent_start)
+        # one start cell: no draw, so a catalogue without start: room keeps its random stream
+        self.agent_pos = (self._starts[0] if len(self._starts) == 1
+                          else self._starts[int(self.np_random.integers(len(self._starts)))])
         self.mission = self.spec_maze.options.mission
 
     def gen_obs(self) -> np.ndarray:
