@@ -150,9 +150,10 @@ class CriticFilter:
 
     def update(self, batch: HighLevelBatch) -> dict[str, float]:
         """One critic update on the minibatch. The TDBatch itself goes to the critic, not its
-        ``residuals`` method, so that its ``weight`` scales the likelihood: a pool of K minibatches counts
-        as their mean or their sum (``loop.critic_pool_weight``). An outcome likelihood gets the recent
-        successes attached; before the first success it has no evidence, and no update runs (Ĝt = G0)."""
+        ``residuals`` method, so that its ``weight`` scales the TD likelihood: a pool of K minibatches
+        counts as their mean or their sum (``loop.critic_pool_weight``). An outcome likelihood gets the
+        recent successes attached, which count once whatever the pool; before the first success it has
+        no evidence, and no update runs (Ĝt = G0)."""
         if self._needs_outcomes:
             if not self._outcomes:
                 return {}

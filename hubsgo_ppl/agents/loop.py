@@ -10,8 +10,9 @@ Each high-level iteration:
 3. the low level acts until g is achieved, the env ends, or ``option_steps`` pass (lines 3-8);
 4. the transition (s, g, R, s', γ^k) goes to the high-level replay; the high level takes a TD step with
    targets over Ĝt (Eq. 2), and the same minibatch drives the filter's update (lines 9-11), pooled
-   with the previous ones every ``critic_every`` minibatches (``TDBatch.cat``; the pool's likelihood
-   counts as the minibatches' mean, weight 1/K, or with ``critic_pool_weight="sum"`` their sum).
+   with the previous ones every ``critic_every`` minibatches (``TDBatch.cat``; the pool's TD likelihood
+   counts as the minibatches' mean, weight 1/K, or with ``critic_pool_weight="sum"`` their sum; an
+   outcome likelihood's window of recent successes counts once either way).
 
 The loop is the only place where an environment and the critic meet. It does no IO: it returns
 per-episode statistics and leaves logging, progress bars and checkpoints to ``experiments.run``.
@@ -106,8 +107,9 @@ class LoopConfig:
     # the prior's marginals, read once at the critic's first update call
     low_goal_weight: str = "uniform"
     critic_every: int = 1                       # high-level updates pooled into one critic update
-    # how a pool of K minibatches weighs in the likelihood (Eq. 4): "mean" (weight 1/K: an update aims
-    # at the posterior of one minibatch) or "sum" (weight 1: of all K x B transitions). Equal for K = 1
+    # how a pool of K minibatches weighs in the TD likelihood (Eq. 4): "mean" (weight 1/K: an update aims
+    # at the posterior of one minibatch) or "sum" (weight 1: of all K x B transitions). Equal for K = 1;
+    # no effect on an outcome likelihood, whose window of recent successes counts once
     critic_pool_weight: str = "mean"
     filter_refresh: str = "option"              # when the loop reads Ĝt: every "option" or once per "episode"
     # Ĝt given the evidence: the mode of the critic's samples among those that include every sub-goal

@@ -223,8 +223,11 @@ class SubgoalCritic(CriticReadout):
 
     def _evidence(self, data) -> tuple[tuple[torch.Tensor, ...], float, Callable | None]:
         """``(evidence tensors, weight, residual_fn)`` of what :meth:`update` was given: a TDBatch's TD
-        tensors (or its outcomes, for an outcome likelihood) at its ``weight``, or a residual callable
-        with no tensors at weight 1."""
+        tensors at its ``weight``, its outcomes (for an outcome likelihood) at weight 1, or a residual
+        callable with no tensors at weight 1. The weight is that of a pool of TD minibatches
+        (:meth:`TDBatch.cat`); the outcomes are the whole window of recent successes, whatever the pool,
+        so they count once: weighing them by 1/K would temper the evidence by how often the critic
+        updates."""
         if isinstance(data, TDBatch):
             if data.n != self.n:
                 raise ValueError(f"TDBatch has {data.n} sub-goal columns but the critic has N = {self.n}")
@@ -232,7 +235,7 @@ class SubgoalCritic(CriticReadout):
                 if data.outcomes is None or data.outcomes.shape[0] == 0:
                     raise ValueError(f"the {self.likelihood.registered_name!r} likelihood scores outcomes, and "
                                      "this TDBatch has none; attach the achieved sets of successful episodes")
-                return (data.outcomes,), data.weight, None
+                return (data.outcomes,), 1.0, None
             return data.tensors(), data.weight, None
         if self.likelihood.evidence == "outcomes":
             raise TypeError(f"the {self.likelihood.registered_name!r} likelihood scores outcomes: pass a TDBatch "

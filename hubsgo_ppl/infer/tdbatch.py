@@ -27,8 +27,10 @@ class TDBatch:
     ``available`` (optional, bool (B, N)): the sub-goals selectable at s_{t+k} (e.g. not yet achieved);
     the max of Eq. 2 runs over G(w) ∩ available. Tensors are detached on construction: the critic never
     trains Q.
-    ``weight`` scales the batch's log-likelihood (Eq. 4) in the ELBO: :meth:`cat` pools K minibatches
-    into one update at weight 1/K, so the posterior an update aims at stays that of one minibatch.
+    ``weight`` scales the batch's TD log-likelihood (Eq. 4) in the ELBO: :meth:`cat` pools K minibatches
+    into one update at weight 1/K, so the posterior an update aims at stays that of one minibatch. It
+    does not scale ``outcomes``: they are the whole window of recent successes, not a minibatch, and
+    count once in every update.
     """
 
     q_taken: torch.Tensor
