@@ -38,6 +38,7 @@ ROUTES = {
     "twowall": [set(a + b + ["goal"]) for a in _PAIR for b in (["red_key", "red_door"], ["purple_key", "purple_door"])],
     "fourroom": [{"door_top", "door_right", "goal"}, {"door_left", "door_bottom", "goal"}],
     "vault": [set(p + ["green_door", "goal"]) for p in _PAIR],
+    "detour": [{"red_key", "red_door", "goal"}, {"purple_key", "purple_door", "goal"}],
 }
 ROUTES["vault_moved"] = ROUTES["vault"]
 

@@ -160,7 +160,8 @@ def test_transition_matches_minigrid_on_random_rollouts(tmp_path):
 
 @pytest.mark.parametrize("task, steps", [("threepair", 12), ("threepair_moved", 18), ("twowall", 30),
                                          ("vault", 26), ("vault_moved", 33), ("keydoor_n9", 19),
-                                         ("keydoor_n17", 19), ("keydoor_n33", 19), ("keydoor_n65", 19)])
+                                         ("keydoor_n17", 19), ("keydoor_n33", 19), ("keydoor_n65", 19),
+                                         ("detour", 20)])
 def test_new_mazes_have_their_bfs_optimum(task, steps):
     assert optimal_steps(task) == steps
 
