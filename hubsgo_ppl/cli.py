@@ -7,7 +7,7 @@
     hubsgo subgoals RUN_DIR
     hubsgo tasks
     hubsgo diagnose RUN_DIR [--chains 4]
-    hubsgo sweep SWEEP.yaml [--backend local|ray] [--workers K]
+    hubsgo sweep SWEEP.yaml [--backend local|ray] [--workers K] [--variants NAME ...] [--tasks NAME ...]
     hubsgo report SWEEP_DIR
     hubsgo review RUN_DIR [--threshold 0.2] [--out DIR] [--no-gif]
     hubsgo render RUN_DIR [--out FILE.gif] [--seed N]
@@ -193,7 +193,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     from .experiments.sweep import run_sweep
 
     result = run_sweep(args.sweep, backend=args.backend, workers=args.workers, out=args.out,
-                       progress=not args.no_progress)
+                       progress=not args.no_progress, variants=args.variants, tasks=args.tasks)
     print(f"sweep {result['sweep_dir']}: {result['finished']} finished, {result['skipped']} skipped "
           f"(already done), {result['retried']} retried, {len(result['failed'])} failed")
     for f in result["failed"]:
@@ -322,6 +322,8 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--backend", choices=["local", "ray"], default="local")
     w.add_argument("--workers", type=int, default=2)
     w.add_argument("--out", help="sweep directory (default runs/sweeps/NAME)")
+    w.add_argument("--variants", nargs="+", metavar="NAME", help="run only these variants (rows) of the grid")
+    w.add_argument("--tasks", nargs="+", metavar="NAME", help="run only these tasks (columns) of the grid")
     w.add_argument("--no-progress", action="store_true")
     w.set_defaults(func=cmd_sweep)
 

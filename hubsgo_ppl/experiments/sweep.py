@@ -41,7 +41,7 @@ from ..specs import SpecError, StrictModel, load_yaml, validate_spec
 from .io import CheckpointError, load_checkpoint, write_yaml
 from .run import CHECKPOINT, CHECKPOINT_STEPS, RunConfig, RunError
 
-__all__ = ["SweepSpec", "TaskEntry", "Variant", "Job", "load_sweep", "plan", "run_sweep", "run_status",
+__all__ = ["SweepSpec", "TaskEntry", "Variant", "Job", "load_sweep", "plan", "select", "run_sweep", "run_status",
            "KILL_ENV"]
 
 #: test-only: a worker whose run id ("task/variant/seedK") equals this variable SIGKILLs itself right
@@ -294,9 +294,28 @@ def _ray(jobs: list[Job], workers: int, done: Any) -> None:
             ray.shutdown()
 
 
+def select(spec: SweepSpec, path: Path, variants: list[str] | None = None,
+           tasks: list[str] | None = None) -> SweepSpec:
+    """The part of the grid with only these variants (rows) and tasks (columns); None keeps them all.
+    A name the grid lacks is refused, naming the ones it has."""
+    update: dict[str, Any] = {}
+    for what, chosen, entries in (("variants", variants, spec.variants), ("tasks", tasks, spec.tasks)):
+        if chosen is None:
+            continue
+        names = [e.name for e in entries]
+        unknown = [c for c in chosen if c not in names]
+        if unknown:
+            raise SpecError(f"{path}: no {what} named {', '.join(map(repr, unknown))}; its {what}: {', '.join(names)}")
+        update[what] = [e for e in entries if e.name in chosen]
+    return spec.model_copy(update=update)
+
+
 def run_sweep(sweep: str | Path, backend: str = "local", workers: int = 2, out: str | Path | None = None,
-              progress: bool = True) -> dict[str, Any]:
+              progress: bool = True, variants: list[str] | None = None,
+              tasks: list[str] | None = None) -> dict[str, Any]:
     """Run (or continue) a sweep. Returns ``{sweep_dir, finished, skipped, retried, failed, runs}``.
+    ``variants`` and ``tasks`` run only those rows and columns of the grid (:func:`select`); the
+    folder's ``sweep.yaml`` still records the whole grid, so a later call can run the rest into it.
 
     ``finished`` counts runs completed by this call, ``skipped`` runs that were already complete,
     ``retried`` runs that crashed once and were run again, ``failed`` the ``"run_id: error"`` of runs
@@ -307,10 +326,11 @@ def run_sweep(sweep: str | Path, backend: str = "local", workers: int = 2, out: 
     if workers < 1:
         raise ValueError(f"--workers must be at least 1, got {workers}")
     spec, path = load_sweep(sweep)
+    part = select(spec, path, variants, tasks)
     sweep_dir = Path(out) if out is not None else Path("runs") / "sweeps" / spec.name
     sweep_dir.mkdir(parents=True, exist_ok=True)
     write_yaml(sweep_dir / "sweep.yaml", {**spec.model_dump(mode="json"), "source": str(path)})
-    jobs = plan(spec, sweep_dir)
+    jobs = plan(part, sweep_dir)
     status = {j.run_id: run_status(j) for j in jobs}
     todo = [j for j in jobs if status[j.run_id] != "finished"]
     result: dict[str, Any] = {"sweep_dir": str(sweep_dir), "finished": 0,

@@ -126,3 +126,23 @@ def test_bad_backend_and_workers(tmp_path):
         run_sweep(path, backend="slurm", out=tmp_path / "x", progress=False)
     with pytest.raises(ValueError, match="at least 1"):
         run_sweep(path, workers=0, out=tmp_path / "x", progress=False)
+
+
+def test_a_subset_of_the_grid_runs_only_its_rows_and_columns_and_the_rest_follows_into_the_same_folder(tmp_path, capsys):
+    from hubsgo_ppl.cli import main
+
+    path = _write(tmp_path, tasks=[{"name": "fourroom", "steps": 1}, {"name": "keydoor", "steps": 1}],
+                  variants=[{"name": "hdqn", "agent": "hdqn"}, {"name": "hubsgo", "agent": "hubsgo"}])
+    out = tmp_path / "sweep"
+    part = run_sweep(path, workers=1, out=out, progress=False, variants=["hubsgo"], tasks=["keydoor"])
+    assert list(part["runs"]) == ["keydoor/hubsgo/seed0"] and part["finished"] == 1
+    assert sorted(str(p.relative_to(out).parent) for p in out.rglob("metrics.csv")) == ["keydoor/hubsgo/seed0"]
+    assert len(yaml.safe_load((out / "sweep.yaml").read_text())["variants"]) == 2   # the whole grid recorded
+    rest = run_sweep(path, workers=1, out=out, progress=False)
+    assert (rest["finished"], rest["skipped"]) == (3, 1)
+    # a name the grid lacks: one line naming what it has, and nothing runs
+    assert main(["sweep", str(path), "--out", str(tmp_path / "none"), "--variants", "hubsgo", "ppo",
+                 "--no-progress"]) != 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no variants named 'ppo'; its variants: hdqn, hubsgo" in err[0], err
+    assert not (tmp_path / "none").exists()
