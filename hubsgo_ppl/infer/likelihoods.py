@@ -123,26 +123,36 @@ class LaplaceLikelihood(Likelihood):
 @register_likelihood("outcome")
 class OutcomeLikelihood(Likelihood):
     """Evidence from outcomes: each recent successful episode's achieved set ``a_e`` (E, N) is a noisy
-    copy of one route, each indicator flipped with probability ``flip``; the route is one of them::
+    copy of one route, each indicator flipped with probability ``flip``; the route is one of them,
+    and the evidence is tempered by ``power``::
 
-        p(a_1..a_E | w) = 1/E sum_e prod_i flip^[a_ei != w_i] (1 - flip)^[a_ei == w_i]
+        log p(a_1..a_E | w) = power * log( 1/E sum_e prod_i flip^[a_ei != w_i] (1 - flip)^[a_ei == w_i] )
 
     A mixture over episodes, not a product: the posterior's mode is the most frequent successful set
     (smoothed by ``flip``), so two routes seen equally often give two modes rather than their union,
     and the evidence does not harden as episodes accumulate. Each sub-goal that ``w`` sets differently
-    from an episode costs ``log((1 - flip) / flip)`` nats (3.9 at the default 0.02).
+    from an episode costs ``power * log((1 - flip) / flip)`` nats: 0.97 at the defaults (0.25, 0.02).
+
+    ``power`` sets how far the agent's successes can overrule the human's prior. At 0.25 a mismatch
+    costs less than the shipped specs' Ising field of -2, so a sub-goal needs a positive edge to enter
+    G*, and the evidence chooses among the routes the edges allow; the sub-goals that a wandering early
+    success crossed by chance cannot lock themselves into Ĝt. At 1 the evidence also brings in a
+    sub-goal every success needs that the spec left unlinked, and undoes a wrong positive edge, but on
+    mazes with many candidate cells the first successes' cells then stay in Ĝt, and learning slows
+    (docs/results.md, "How strongly the successes speak").
     """
 
     evidence = "outcomes"
 
-    def __init__(self, flip: float = 0.02):
+    def __init__(self, flip: float = 0.02, power: float = 0.25):
         flip = _positive("outcome", "flip", flip)
         if not flip < 0.5:
             raise ValueError(f"outcome likelihood: flip must be < 0.5, got {flip!r}; e.g. flip: 0.02")
         self.flip = flip
+        self.power = _positive("outcome", "power", power)
 
     def params(self):
-        return {"flip": self.flip}
+        return {"flip": self.flip, "power": self.power}
 
     def log_likelihood(self, w: torch.Tensor, outcomes: torch.Tensor) -> torch.Tensor:
         if outcomes.dim() != 2 or outcomes.shape[0] == 0 or outcomes.shape[1] != w.shape[-1]:
@@ -150,4 +160,4 @@ class OutcomeLikelihood(Likelihood):
         mismatch = (w.unsqueeze(-2) - outcomes).abs().sum(-1)                     # (..., E)
         n = w.shape[-1]
         per_episode = mismatch * math.log(self.flip) + (n - mismatch) * math.log1p(-self.flip)
-        return torch.logsumexp(per_episode, -1) - math.log(outcomes.shape[0])
+        return (torch.logsumexp(per_episode, -1) - math.log(outcomes.shape[0])) * self.power
