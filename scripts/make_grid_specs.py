@@ -1,6 +1,8 @@
 """Write the critic specs of the prior x likelihood grid (sweeps/specs/<task>-<prior>-<likelihood>.yaml):
 every registered prior with every registered likelihood, each at its default parameters, on the task's
 default spec's sub-goals and human edges (models/<task>-specific.yaml). Used by sweeps/critic_grid.yaml.
+Also the default specs with the outcome evidence untempered (sweeps/specs/<task>-power1.yaml, the
+outcome likelihood's ``power: 1.0``), used by sweeps/critic_power.yaml.
 Run from the repository root: ``python scripts/make_grid_specs.py``.
 """
 
@@ -15,6 +17,7 @@ from hubsgo_ppl.infer.priors import PRIORS
 
 ROOT = Path(__file__).resolve().parents[1]
 TASKS = ("keydoor", "threepair")
+POWER_TASKS = ("keydoor", "keydoor_n65", "threepair", "fourroom", "detour")
 
 
 def main() -> None:
@@ -32,6 +35,13 @@ def main() -> None:
                 path.write_text(f"# {task}: prior {prior}, likelihood {lik}, both at their default parameters "
                                 "(scripts/make_grid_specs.py)\n" + yaml.safe_dump(spec, sort_keys=False, width=120))
                 print(path.relative_to(ROOT))
+    for task in POWER_TASKS:
+        base = yaml.safe_load((ROOT / "models" / f"{task}-specific.yaml").read_text())
+        spec = {**base, "name": f"{task}-power1", "likelihood": {**base["likelihood"], "power": 1.0}}
+        path = out / f"{task}-power1.yaml"
+        path.write_text(f"# {task}: the default spec with the outcome evidence untempered, power 1.0 "
+                        "(scripts/make_grid_specs.py)\n" + yaml.safe_dump(spec, sort_keys=False, width=120))
+        print(path.relative_to(ROOT))
 
 
 if __name__ == "__main__":
