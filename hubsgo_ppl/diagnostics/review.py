@@ -11,6 +11,9 @@ that the human can revise the spec:
   contradicts the human's (a positive edge with J < -dead_band, a negative edge with J > dead_band);
   edges the human left unknown whose |J| exceeds the dead band get a *suggested sign*;
 - *suggested drops*: sub-goals the critic has pushed below ``threshold`` (P(w_i = 1) < threshold);
+- where G*'s top set and the recent successes disagree (:func:`prior_against_successes`): a sub-goal
+  the human's positive edges keep in G* though most successes did without it, and one every success
+  achieved that G* leaves out;
 - what the agent achieves: the frequency of each sub-goal over the filter's recent successful
   episodes (``CriticFilter.outcomes()``), and the success rate over the last K episodes of
   ``metrics.csv`` (with per-sub-goal frequencies when it has ``visited/<name>`` columns);
@@ -46,7 +49,8 @@ from ..experiments.io import write_json, write_text
 from ..experiments.logger import read_csv_rows
 from ..experiments.run import RunError, load_run
 
-__all__ = ["review", "compare_couplings", "human_edge_signs", "suggested_drops", "marginal_trend",
+__all__ = ["review", "compare_couplings", "human_edge_signs", "suggested_drops", "prior_against_successes",
+           "marginal_trend",
            "achieved_frequencies", "metrics_summary", "render_markdown", "plot_review_graph", "format_chosen", "DEAD_BAND", "REVIEW_FORMAT"]
 
 REVIEW_FORMAT = 1
@@ -107,6 +111,36 @@ def suggested_drops(marginals: Mapping[str, float], threshold: float,
               "success_frequency": None if achieved is None else float(achieved.get(n, 0.0))}
              for n, p in marginals.items() if float(p) < threshold]
     return sorted(drops, key=lambda d: (d["marginal"], d["name"]))
+
+
+def prior_against_successes(top: Sequence[str], names: Sequence[str], achieved: Mapping[str, float] | None,
+                            human: Mapping[frozenset, str], rare: float = 0.5) -> dict[str, list[dict[str, Any]]]:
+    """Where G*'s top set and the recent successes disagree, and which of the human's edges explain it.
+
+    - ``held_by_edges``: sub-goals in the top set that fewer than ``rare`` of the recent successes
+      achieved, each with the human's positive edges that pull it in (the prior, not the successes,
+      keeps it there: a wrong edge to a sub-goal no route needs);
+    - ``needed_not_in_g_star``: sub-goals that every recent success achieved and the top set leaves
+      out, each with its positive edges (none: nothing in the spec lets the tempered evidence of the
+      outcome likelihood bring it in).
+
+    Empty lists without successes (``achieved`` None)."""
+    out: dict[str, list[dict[str, Any]]] = {"held_by_edges": [], "needed_not_in_g_star": []}
+    if achieved is None:
+        return out
+    chosen = set(top)
+
+    def positive(n: str) -> list[str]:
+        return sorted(next(iter(e - {n})) for e, sign in human.items() if n in e and len(e) == 2
+                      and sign == "positive")
+
+    for n in names:
+        freq = float(achieved.get(n, 0.0))
+        if n in chosen and freq < rare:
+            out["held_by_edges"].append({"name": n, "success_frequency": freq, "positive_edges": positive(n)})
+        elif n not in chosen and freq >= 1.0:
+            out["needed_not_in_g_star"].append({"name": n, "success_frequency": freq, "positive_edges": positive(n)})
+    return out
 
 
 def _previous_review(path: Path, names: list[str]) -> dict[str, Any] | None:
@@ -237,6 +271,7 @@ def _review(run_dir: Path, resolved: dict[str, Any], env: Any, agent: Any, thres
         "suggested_signs": [c for c in couplings if not c["contradicts"] and c["suggestion"]],
         "spec_edges_not_in_graph": spec_only,
         "suggested_drops": suggested_drops(marginals, threshold, achieved["frequency"]),
+        **prior_against_successes(ranking[0]["subgoals"], names, achieved["frequency"], human),
         "achieved": {"recent_successes": achieved, "metrics": metrics_summary(run_dir / "metrics.csv", names, last)},
         "episode": None,
         "files": {"json": "review.json", "markdown": "review.md", "mrf_graph": "mrf_graph.png"},
@@ -342,6 +377,16 @@ def render_markdown(r: dict[str, Any]) -> str:
     for c in r["suggested_signs"]:
         changes.append(f"- edge {c['u']} — {c['v']} (you left it *{c['human']}*): the critic learned J = {c['J']:+.2f}; "
                        f"{c['suggestion']}.")
+    for d in r.get("held_by_edges", []):
+        edges = ", ".join(f"{d['name']} — {v}" for v in d["positive_edges"]) or "none"
+        changes.append(f"- **{d['name']} is in G* but only {_pct(d['success_frequency'])} of the recent successes "
+                       f"achieved it**: your positive edges hold it there ({edges}); remove them, or drop {d['name']}.")
+    for d in r.get("needed_not_in_g_star", []):
+        edges = ", ".join(f"{d['name']} — {v}" for v in d["positive_edges"])
+        hint = (f"its positive edges ({edges}) are not enough" if edges
+                else "no positive edge links it to the route")
+        changes.append(f"- **every recent success achieved {d['name']}, yet G* leaves it out**: {hint}; add a positive "
+                       f"edge to the sub-goal it goes with, or raise the outcome likelihood's power.")
     lines += changes or [f"None: every learned coupling agrees with your edge signs, and every sub-goal has "
                          f"P(w = 1) >= {r['threshold']:.2f}."]
 

@@ -11,7 +11,7 @@ from hubsgo_ppl.cli import main
 from hubsgo_ppl.experiments.io import load_checkpoint, save_torch
 from hubsgo_ppl.experiments.logger import read_csv_rows
 from hubsgo_ppl.diagnostics.review import (compare_couplings, format_chosen, human_edge_signs, marginal_trend,
-                                           review, suggested_drops)
+                                           prior_against_successes, review, suggested_drops)
 from hubsgo_ppl.experiments.run import RunConfig, RunError, load_run, train
 
 TINY = ["high.learning_starts=8", "high.batch_size=8", "low.learning_starts=64", "low.batch_size=32",
@@ -220,3 +220,37 @@ def test_drops_and_trend_on_hand_made_marginals():
     assert t["delta"] == pytest.approx({"a": -0.05, "b": 0.0, "c": 0.19, "d": -0.8})
     assert marginal_trend(marg, None)["delta"] is None
     assert format_chosen(["a", "a", "b", "a"]) == "a x2, b, a"
+
+
+def test_prior_against_successes_names_what_the_edges_hold_in_and_what_the_successes_need():
+    human = {frozenset(("key", "door")): "positive", frozenset(("corner", "goal")): "positive",
+             frozenset(("corner", "key")): "negative", frozenset(("door", "other")): "unknown"}
+    names = ["key", "door", "goal", "corner", "other"]
+    freq = {"key": 1.0, "door": 1.0, "goal": 1.0, "corner": 0.3, "other": 0.5}
+    r = prior_against_successes(["key", "door", "corner"], names, freq, human)
+    assert r["held_by_edges"] == [{"name": "corner", "success_frequency": 0.3, "positive_edges": ["goal"]}]
+    assert r["needed_not_in_g_star"] == [{"name": "goal", "success_frequency": 1.0, "positive_edges": ["corner"]}]
+    # at half of the successes a sub-goal is not flagged; nor is one in no success and not in G*
+    assert prior_against_successes(["key", "door", "goal", "other"], names, freq, human) == {
+        "held_by_edges": [], "needed_not_in_g_star": []}
+    assert prior_against_successes([], names, None, human) == {"held_by_edges": [], "needed_not_in_g_star": []}
+
+
+def test_review_says_which_edge_holds_a_subgoal_the_successes_skip(run, tmp_path):
+    run2 = _copy(run, tmp_path / "held")
+    edges = [tuple(e) for e in _edit_critic(run2)]
+    names = list(load_run(run2)[2].filter.critic.names)
+    # q all but certain of {yellow_key, yellow_door, goal}; the successes took the yellow route and
+    # reached the goal, but only one of four held the yellow key at any step
+    theta = {i: (6.0 if n in ("yellow_key", "yellow_door", "goal") else -6.0) for i, n in enumerate(names)}
+    wins = [[1 if n in ("yellow_door", "goal") or (k == 0 and n == "yellow_key") else 0 for n in names]
+            for k in range(4)]
+    _edit_critic(run2, theta=theta, coupling={j: 0.0 for j in range(len(edges))}, outcomes=wins)
+    r = review(run2, threshold=0.2, gif=False)
+    assert set(r["g_star"]["subgoals"]) == {"yellow_key", "yellow_door", "goal"}
+    assert r["held_by_edges"] == [{"name": "yellow_key", "success_frequency": 0.25,
+                                   "positive_edges": ["yellow_door"]}]
+    assert r["needed_not_in_g_star"] == []
+    md = (run2 / "review" / "review.md").read_text()
+    assert ("**yellow_key is in G* but only 25% of the recent successes achieved it**: your positive edges hold it "
+            "there (yellow_key — yellow_door)") in md
