@@ -231,6 +231,11 @@ def cmd_review(args: argparse.Namespace) -> int:
     print(f"flagged edges (learned sign contradicts yours): {'; '.join(flagged) or 'none'}")
     drops = [f"{d['name']} (P={d['marginal']:.2f})" for d in r["suggested_drops"]]
     print(f"suggested drops (P(w=1) < {r['threshold']:.2f}): {', '.join(drops) or 'none'}")
+    held = [f"{d['name']} ({d['success_frequency']:.0%}; edges to {', '.join(d['positive_edges']) or 'none'})"
+            for d in r["held_by_edges"]]
+    print(f"in G*, held by your positive edges, skipped by most successes: {'; '.join(held) or 'none'}")
+    needed = [d["name"] for d in r["needed_not_in_g_star"]]
+    print(f"achieved by every recent success, not in G*: {', '.join(needed) or 'none'}")
     succ = r["achieved"]["recent_successes"]
     if succ["episodes"]:
         print(f"achieved on the {succ['episodes']} recent successes: "

@@ -137,6 +137,8 @@ def test_cli_review_prints_summary(run, tmp_path, capsys):
     assert main(["review", str(run), "--out", str(out), "--no-gif", "--threshold", "0.3"]) == 0
     text = capsys.readouterr().out
     assert "G*: {" in text and "flagged edges" in text and "suggested drops (P(w=1) < 0.30)" in text
+    assert "in G*, held by your positive edges, skipped by most successes: " in text
+    assert "achieved by every recent success, not in G*: " in text
     assert f"json: {out / 'review.json'}" in text and (out / "review.md").is_file()
 
 
