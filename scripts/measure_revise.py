@@ -5,7 +5,9 @@ script runs it. For each task with misleading sub-goals and each seed, at the ta
 
 - ``revised``: train with the task's built-in spec (``<task>-specific``), pause at B/3, review the
   critic, write the corrected spec (drop every suggested sub-goal that fewer than half of the recent
-  successes achieved, with its edges; give each flagged edge its learned sign), revise, continue to B;
+  successes achieved, with its edges; give each flagged edge its learned sign; with ``--unlink-held``
+  also remove the positive edges that the review says hold a sub-goal in G* which most successes
+  skipped), revise, continue to B;
 - ``unrevised``: the same paused run (a copy taken before the revision) continued to B as it was;
 - ``restart``: a run from scratch with the corrected spec of the same seed, budget B.
 
@@ -13,13 +15,15 @@ Per arm it reports, as mean ± standard error over the seeds: the success rate o
 episodes, the mean return over the last third of the budget, and the env steps until the rolling
 success rate (20 episodes) first reaches 90% (runs that never reach it are counted, not averaged), in
 the arm's own run and in total: a restart begins where the other two arms paused, so its total adds
-the B/3 steps spent before the pause; and the env step of the first success in the arm's own run.
+the B/3 steps spent before the pause; the env step of the first success in the arm's own run; and
+at the end of each run whether G*'s top set is exactly one route (``critic_report.consistent``) and
+its probability.
 For the revised and unrevised arms also the failed episodes that began after the pause and the mean
 length of the 20th to 60th of those episodes.
 Everything goes under ``--out``: one folder per task, seed and arm, ``results.csv`` (one row per run)
 and ``summary.md``. Re-running skips finished runs (the runs are ordinary run directories), so ``--out``
-remembers its settings (``settings.json``: ``--steps``, ``--set``, ``--threshold``, ``--keep-linked``)
-and refuses other ones; more seeds or tasks may be added.
+remembers its settings (``settings.json``: ``--steps``, ``--set``, ``--threshold``, ``--keep-linked``,
+and ``--unlink-held`` where given) and refuses other ones; more seeds or tasks may be added.
 
     .venv/bin/python scripts/measure_revise.py --out runs/measure_revise            # 2 tasks x 5 seeds, 40,000 steps
     .venv/bin/python scripts/measure_revise.py --out runs/smoke_revise --smoke        # a pipeline check in a minute
@@ -62,10 +66,13 @@ def run_stats(run: Path, budget: int, pause: int | None = None) -> dict[str, flo
     return out
 
 
-def corrected_spec(review: dict[str, Any], spec: dict[str, Any], path: Path, keep_linked: bool = False) -> Path:
+def corrected_spec(review: dict[str, Any], spec: dict[str, Any], path: Path, keep_linked: bool = False,
+                   unlink_held: bool = False) -> Path:
     """The human's revision of ``spec`` after ``review`` (module docstring), written to ``path``.
     ``keep_linked``: a human who drops only suggested sub-goals that no edge of the spec joins to
-    another sub-goal (the route not taken stays; sub-goals the human related to nothing go)."""
+    another sub-goal (the route not taken stays; sub-goals the human related to nothing go).
+    ``unlink_held``: a human who also removes the positive edges that hold a sub-goal in G* though
+    most recent successes skipped it (``review["held_by_edges"]``); the sub-goal stays a candidate."""
 
     linked = {n for u, v, _ in spec["edges"] for n in (u, v)}
     drop = {d["name"] for d in review["suggested_drops"]
@@ -75,17 +82,31 @@ def corrected_spec(review: dict[str, Any], spec: dict[str, Any], path: Path, kee
     if not keep:                                    # a spec lists at least one sub-goal
         keep, drop = list(spec["subgoals"]), set()
     flip = {frozenset((c["u"], c["v"])): c["learned"] for c in review["flagged_edges"]}
+    unlink = {frozenset((d["name"], v)) for d in review.get("held_by_edges", []) if unlink_held
+              for v in d["positive_edges"]}
     new = dict(spec, name=f"{spec['name']}-revised", subgoals=keep,
                edges=[[u, v, flip.get(frozenset((u, v)), s)] for u, v, s in spec["edges"]
-                      if u not in drop and v not in drop])
+                      if u not in drop and v not in drop and frozenset((u, v)) not in unlink])
     from hubsgo_ppl.experiments.io import write_yaml
 
     write_yaml(path, new)
     return path
 
 
+def g_star(run: Path, task: str) -> dict[str, float]:
+    """Whether the run's final G* top set (``subgoals.json``) is exactly one route (1.0 or 0.0; NaN
+    where the task's routes are not known) and its probability."""
+    import json
+
+    from critic_report import consistent
+
+    top = json.loads((run / "subgoals.json").read_text())["ranking"][0]
+    ok = consistent(task, set(top["subgoals"]))
+    return {"g_star_one_route": float("nan") if ok is None else float(ok), "g_star_p": float(top["prob"])}
+
+
 def one(task: str, seed: int, out: Path, steps: int | None, overrides: list[str], threshold: float,
-        keep_linked: bool = False) -> list[dict]:
+        keep_linked: bool = False, unlink_held: bool = False) -> list[dict]:
     """The three arms of one (task, seed); returns one result row per arm."""
     import torch
     import yaml
@@ -115,7 +136,7 @@ def one(task: str, seed: int, out: Path, steps: int | None, overrides: list[str]
         shutil.copytree(runs["revised"], runs["unrevised"])
         r = review(runs["revised"], threshold=threshold, gif=False, num_samples=2_000)
         spec = load_checkpoint(runs["revised"] / "checkpoint.pt")["config"]["model_spec"]
-        corrected_spec(r, spec, spec_path, keep_linked)
+        corrected_spec(r, spec, spec_path, keep_linked, unlink_held)
         revise(runs["revised"], spec_path, progress=False)
         train(RunConfig(task=task), runs["unrevised"], resume=True, progress=False)
     if not finished(runs["restart"]):
@@ -125,7 +146,8 @@ def one(task: str, seed: int, out: Path, steps: int | None, overrides: list[str]
     dropped = [n for n in yaml.safe_load((runs["revised"] / "revisions" / "001" / "spec_before.yaml").read_text())["subgoals"]
                if n not in yaml.safe_load(spec_path.read_text())["subgoals"]]
     rows = [{"task": task, "seed": seed, "arm": arm, "budget": budget, "dropped": " ".join(dropped),
-             **run_stats(runs[arm], budget, None if arm == "restart" else budget // 3)} for arm in ARMS]
+             **run_stats(runs[arm], budget, None if arm == "restart" else budget // 3), **g_star(runs[arm], task)}
+            for arm in ARMS]
     for row in rows:    # total env steps: a restart begins where the other two arms paused
         row["total_steps_to_90"] = row["steps_to_90"] + (budget // 3 if row["arm"] == "restart" else 0)
     return rows
@@ -136,9 +158,10 @@ def summarise(rows: list[dict], path: Path) -> str:
                          ["task", "arm", "seeds", "success, last 20 episodes", "return, last third",
                           "steps to 90% success (own run)", "total env steps to 90% success",
                           "first success (own run)", "failed episodes after B/3",
-                          "length of the 20th-60th episode after B/3"],
+                          "length of the 20th-60th episode after B/3", "G* one route (share of seeds)",
+                          "p(top)"],
                          ["final_success", "late_return", "steps_to_90", "total_steps_to_90", "first_success",
-                          "failures_after_pause", "settled_length"], path)
+                          "failures_after_pause", "settled_length", "g_star_one_route", "g_star_p"], path)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -147,14 +170,19 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--threshold", type=float, default=0.2, help="the review's drop threshold")
     p.add_argument("--keep-linked", action="store_true",
                    help="drop only suggested sub-goals that no edge of the spec joins to another one")
+    p.add_argument("--unlink-held", action="store_true",
+                   help="also remove the positive edges that hold a sub-goal in G* which most successes skipped")
     args = p.parse_args(argv)
     overrides: list[str] = list(args.overrides)
     if args.smoke:
         args.tasks, args.seeds, args.steps, overrides = ["keydoor_incorrect"], args.seeds[:1], 1_500, SMOKE + overrides
     out = output_dir(args.out)
-    guard_settings(out, "measure_revise", {"steps": args.steps, "overrides": overrides, "threshold": args.threshold,
-                                           "keep_linked": args.keep_linked})
-    jobs = [(t, s, out, args.steps, overrides, args.threshold, args.keep_linked) for t in args.tasks for s in args.seeds]
+    settings = {"steps": args.steps, "overrides": overrides, "threshold": args.threshold, "keep_linked": args.keep_linked}
+    if args.unlink_held:            # recorded only where given: folders made before the option still match
+        settings["unlink_held"] = True
+    guard_settings(out, "measure_revise", settings)
+    jobs = [(t, s, out, args.steps, overrides, args.threshold, args.keep_linked, args.unlink_held)
+            for t in args.tasks for s in args.seeds]
     return finish(run_jobs(one, jobs, args.workers), out, summarise)
 
 

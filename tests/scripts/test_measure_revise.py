@@ -69,3 +69,29 @@ def test_the_corrected_spec_drops_suggested_sub_goals_and_with_keep_linked_only_
     assert linked["subgoals"] == ["a_key", "a_door", "b_key", "b_door", "goal"]
     # the flagged edge takes its learned sign; the others keep the human's
     assert ["a_key", "b_key", "positive"] in linked["edges"] and len(linked["edges"]) == 5
+
+
+def test_unlink_held_removes_only_the_positive_edges_the_review_names(tmp_path):
+    import yaml
+
+    spec = {"name": "toy", "task": "detour", "subgoals": ["r_key", "r_door", "goal", "corner"],
+            "edges": [["r_key", "r_door", "positive"], ["r_door", "goal", "positive"], ["corner", "goal", "positive"]]}
+    review = {"suggested_drops": [], "flagged_edges": [],
+              "held_by_edges": [{"name": "corner", "success_frequency": 0.3, "positive_edges": ["goal"]}]}
+    kept = yaml.safe_load(measure_revise.corrected_spec(review, spec, tmp_path / "kept.yaml").read_text())
+    assert kept["edges"] == spec["edges"]                              # without the option: as before
+    new = yaml.safe_load(measure_revise.corrected_spec(review, spec, tmp_path / "new.yaml", unlink_held=True).read_text())
+    assert new["subgoals"] == spec["subgoals"]                          # the sub-goal stays a candidate
+    assert new["edges"] == [["r_key", "r_door", "positive"], ["r_door", "goal", "positive"]]
+
+
+def test_g_star_reads_whether_the_top_set_is_one_route(tmp_path):
+    import json
+
+    for name, top in (("route", ["purple_key", "purple_door", "goal"]),
+                      ("extra", ["purple_key", "purple_door", "goal", "far_corner"])):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "subgoals.json").write_text(json.dumps({"ranking": [{"subgoals": top, "prob": 0.5}]}))
+    assert measure_revise.g_star(tmp_path / "route", "detour") == {"g_star_one_route": 1.0, "g_star_p": 0.5}
+    assert measure_revise.g_star(tmp_path / "extra", "detour")["g_star_one_route"] == 0.0
+    assert math.isnan(measure_revise.g_star(tmp_path / "route", "unknown_maze")["g_star_one_route"])
