@@ -50,8 +50,7 @@ from ..experiments.logger import read_csv_rows
 from ..experiments.run import RunError, load_run
 
 __all__ = ["review", "compare_couplings", "human_edge_signs", "suggested_drops", "prior_against_successes",
-           "marginal_trend",
-           "achieved_frequencies", "metrics_summary", "render_markdown", "plot_review_graph", "format_chosen", "DEAD_BAND", "REVIEW_FORMAT"]
+           "marginal_trend", "achieved_frequencies", "metrics_summary", "render_markdown", "plot_review_graph", "format_chosen", "DEAD_BAND", "REVIEW_FORMAT"]
 
 REVIEW_FORMAT = 1
 #: |J| at or below this counts as "no learned sign": it neither contradicts nor suggests a sign
@@ -121,8 +120,8 @@ def prior_against_successes(top: Sequence[str], names: Sequence[str], achieved: 
       achieved, each with the human's positive edges that pull it in (the prior, not the successes,
       keeps it there: a wrong edge to a sub-goal no route needs);
     - ``needed_not_in_g_star``: sub-goals that every recent success achieved and the top set leaves
-      out, each with its positive edges (none: nothing in the spec lets the tempered evidence of the
-      outcome likelihood bring it in).
+      out, each with its positive edges (with none, the outcome likelihood's tempered evidence alone
+      cannot bring it in).
 
     Empty lists without successes (``achieved`` None)."""
     out: dict[str, list[dict[str, Any]]] = {"held_by_edges": [], "needed_not_in_g_star": []}
