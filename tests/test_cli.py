@@ -113,6 +113,29 @@ def test_a_run_that_cannot_be_built_keeps_an_existing_out_folder(capsys, tmp_pat
     assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]
 
 
+def test_a_user_maze_without_a_spec_asks_for_one_and_trains_with_one(capsys, tmp_path):
+    (tmp_path / "hall.txt").write_text("#######\n#A..#.#\n#.k.D.#\n#...#G#\n#######\n")
+    (tmp_path / "hall.yaml").write_text(yaml.safe_dump({
+        "task": "hall", "family": "minigrid",
+        "options": {"layout": "hall.txt", "legend": {"k": {"type": "key", "color": "red"},
+                                                     "D": {"type": "door", "color": "red", "locked": True}}},
+        "subgoals": [{"name": "key", "kind": "carrying", "args": {"type": "key", "color": "red"}},
+                     {"name": "door", "kind": "door_open", "args": {"color": "red"}},
+                     {"name": "goal", "kind": "goal"}]}))
+    out = tmp_path / "run"
+    assert main(["train", str(tmp_path / "hall.yaml"), "--out", str(out), "--steps", "100", "--no-progress"]) == 2
+    line = _one_error_line(capsys)
+    assert "task 'hall' has no built-in critic spec hall-specific" in line and "--model my_spec.yaml" in line
+    assert not out.exists()
+    (tmp_path / "hall-spec.yaml").write_text(yaml.safe_dump({
+        "name": "hall-spec", "task": "hall", "subgoals": ["key", "door", "goal"], "graph": "specific",
+        "edges": [["key", "door", "positive"], ["door", "goal", "positive"]],
+        "prior": {"name": "ising", "strength": 3.0, "field": -2.0}, "likelihood": {"name": "outcome"}}))
+    assert main(["train", str(tmp_path / "hall.yaml"), "--model", str(tmp_path / "hall-spec.yaml"), "--out", str(out),
+                 "--steps", "300", "--no-progress", *TINY]) == 0
+    assert json.loads((out / "subgoals.json").read_text())["names"] == ["key", "door", "goal"]
+
+
 def test_missing_robosuite_names_the_extra(monkeypatch, capsys, tmp_path):
     for name in [m for m in sys.modules if m.startswith(("robosuite.", "mujoco.", "hubsgo_ppl.envs.robosuite"))]:
         monkeypatch.delitem(sys.modules, name)
