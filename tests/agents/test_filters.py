@@ -112,8 +112,9 @@ def test_safeguard_can_be_turned_off_and_bad_values_are_refused():
 
 
 def test_outcome_critic_waits_for_the_first_success_then_learns_the_route():
+    # the evidence at full weight (power 1): three successes name the route against the field of -2
     c = SubgoalCritic(GRAPH, prior="ising", prior_params={"strength": 3.0, "field": -2.0},
-                      likelihood="outcome", seed=0)
+                      likelihood="outcome", likelihood_params={"power": 1.0}, seed=0)
     f = CriticFilter(c)
     assert f.update(batches(1)[0]) == {} and f.allowed() is None           # no evidence: Ĝt = G0
     route = np.array([False, False, True, True, True])
@@ -190,9 +191,10 @@ def test_holding_a_key_no_sample_holds_the_filter_can_fall_back_to_the_completio
                           ("yd", "goal", 1), ("bd", "goal", 1)])
     from hubsgo_ppl.infer.critic import InferenceConfig
 
-    def outcome_critic():
+    def outcome_critic():      # the evidence at full weight (power 1), so that no sample holds the blue key
         return SubgoalCritic(graph, prior="ising", prior_params={"strength": 3.0, "field": -2.0},
-                             likelihood="outcome", config=InferenceConfig(init="prior"), seed=0)
+                             likelihood="outcome", likelihood_params={"power": 1.0},
+                             config=InferenceConfig(init="prior"), seed=0)
 
     filters = {fb: CriticFilter(outcome_critic(), keep_fraction=0.0, fallback=fb) for fb in ("mode", "completion")}
     yellow = np.array([True, True, False, False, True])
