@@ -1,8 +1,8 @@
 """Write the critic specs of the prior x likelihood grid (sweeps/specs/<task>-<prior>-<likelihood>.yaml):
 every registered prior with every registered likelihood, each at its default parameters, on the task's
 default spec's sub-goals and human edges (models/<task>-specific.yaml). Used by sweeps/critic_grid.yaml.
-Also the default specs with the outcome evidence untempered (sweeps/specs/<task>-power1.yaml, the
-outcome likelihood's ``power: 1.0``), used by sweeps/critic_power.yaml.
+Also the default specs with the outcome evidence tempered less (sweeps/specs/<task>-power1.yaml and
+<task>-power05.yaml, the outcome likelihood's ``power`` at 1.0 and 0.5), used by sweeps/critic_power.yaml.
 Run from the repository root: ``python scripts/make_grid_specs.py``.
 """
 
@@ -37,11 +37,12 @@ def main() -> None:
                 print(path.relative_to(ROOT))
     for task in POWER_TASKS:
         base = yaml.safe_load((ROOT / "models" / f"{task}-specific.yaml").read_text())
-        spec = {**base, "name": f"{task}-power1", "likelihood": {**base["likelihood"], "power": 1.0}}
-        path = out / f"{task}-power1.yaml"
-        path.write_text(f"# {task}: the default spec with the outcome evidence untempered, power 1.0 "
-                        "(scripts/make_grid_specs.py)\n" + yaml.safe_dump(spec, sort_keys=False, width=120))
-        print(path.relative_to(ROOT))
+        for suffix, power in (("power1", 1.0), ("power05", 0.5)):
+            spec = {**base, "name": f"{task}-{suffix}", "likelihood": {**base["likelihood"], "power": power}}
+            path = out / f"{task}-{suffix}.yaml"
+            path.write_text(f"# {task}: the default spec with the outcome evidence at power {power} "
+                            "(scripts/make_grid_specs.py)\n" + yaml.safe_dump(spec, sort_keys=False, width=120))
+            print(path.relative_to(ROOT))
 
 
 if __name__ == "__main__":
