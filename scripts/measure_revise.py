@@ -82,8 +82,8 @@ def corrected_spec(review: dict[str, Any], spec: dict[str, Any], path: Path, kee
     if not keep:                                    # a spec lists at least one sub-goal
         keep, drop = list(spec["subgoals"]), set()
     flip = {frozenset((c["u"], c["v"])): c["learned"] for c in review["flagged_edges"]}
-    unlink = {frozenset((d["name"], v)) for d in review.get("held_by_edges", []) if unlink_held
-              for v in d["positive_edges"]}
+    held = review.get("held_by_edges", []) if unlink_held else []
+    unlink = {frozenset((d["name"], v)) for d in held for v in d["positive_edges"]}
     new = dict(spec, name=f"{spec['name']}-revised", subgoals=keep,
                edges=[[u, v, flip.get(frozenset((u, v)), s)] for u, v, s in spec["edges"]
                       if u not in drop and v not in drop and frozenset((u, v)) not in unlink])
