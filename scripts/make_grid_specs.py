@@ -20,6 +20,11 @@ TASKS = ("keydoor", "threepair")
 POWER_TASKS = ("keydoor", "keydoor_n65", "threepair", "fourroom", "detour")
 
 
+def write(path: Path, spec: dict, header: str) -> None:
+    path.write_text(f"# {header} (scripts/make_grid_specs.py)\n" + yaml.safe_dump(spec, sort_keys=False, width=120))
+    print(path.relative_to(ROOT))
+
+
 def main() -> None:
     out = ROOT / "sweeps" / "specs"
     out.mkdir(exist_ok=True)
@@ -31,18 +36,13 @@ def main() -> None:
                         "likelihood": {"name": lik},
                         # q starts at the prior where the guide can hold it, else at the edge signs
                         "inference": {**base["inference"], "init": "prior" if prior != "beta_bernoulli" else "edges"}}
-                path = out / f"{task}-{prior}-{lik}.yaml"
-                path.write_text(f"# {task}: prior {prior}, likelihood {lik}, both at their default parameters "
-                                "(scripts/make_grid_specs.py)\n" + yaml.safe_dump(spec, sort_keys=False, width=120))
-                print(path.relative_to(ROOT))
+                write(out / f"{task}-{prior}-{lik}.yaml", spec,
+                      f"{task}: prior {prior}, likelihood {lik}, both at their default parameters")
     for task in POWER_TASKS:
         base = yaml.safe_load((ROOT / "models" / f"{task}-specific.yaml").read_text())
         for suffix, power in (("power1", 1.0), ("power05", 0.5)):
             spec = {**base, "name": f"{task}-{suffix}", "likelihood": {**base["likelihood"], "power": power}}
-            path = out / f"{task}-{suffix}.yaml"
-            path.write_text(f"# {task}: the default spec with the outcome evidence at power {power} "
-                            "(scripts/make_grid_specs.py)\n" + yaml.safe_dump(spec, sort_keys=False, width=120))
-            print(path.relative_to(ROOT))
+            write(out / f"{task}-{suffix}.yaml", spec, f"{task}: the default spec with the outcome evidence at power {power}")
 
 
 if __name__ == "__main__":

@@ -130,8 +130,7 @@ def prior_against_successes(top: Sequence[str], names: Sequence[str], achieved: 
     chosen = set(top)
 
     def positive(n: str) -> list[str]:
-        return sorted(next(iter(e - {n})) for e, sign in human.items() if n in e and len(e) == 2
-                      and sign == "positive")
+        return sorted(next(iter(e - {n})) for e, sign in human.items() if n in e and sign == "positive")
 
     for n in names:
         freq = float(achieved.get(n, 0.0))
@@ -376,11 +375,11 @@ def render_markdown(r: dict[str, Any]) -> str:
     for c in r["suggested_signs"]:
         changes.append(f"- edge {c['u']} — {c['v']} (you left it *{c['human']}*): the critic learned J = {c['J']:+.2f}; "
                        f"{c['suggestion']}.")
-    for d in r.get("held_by_edges", []):
+    for d in r["held_by_edges"]:
         edges = ", ".join(f"{d['name']} — {v}" for v in d["positive_edges"]) or "none"
         changes.append(f"- **{d['name']} is in G* but only {_pct(d['success_frequency'])} of the recent successes "
                        f"achieved it**: your positive edges hold it there ({edges}); remove them, or drop {d['name']}.")
-    for d in r.get("needed_not_in_g_star", []):
+    for d in r["needed_not_in_g_star"]:
         edges = ", ".join(f"{d['name']} — {v}" for v in d["positive_edges"])
         hint = (f"its positive edges ({edges}) are not enough" if edges
                 else "no positive edge links it to the route")

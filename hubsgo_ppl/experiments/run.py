@@ -124,16 +124,15 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
     }
     names = info.catalogue.names
     if cfg.agent == "hubsgo" or cfg.model is not None:
-        from ..specs import load_model_spec, match_subgoals
+        from ..specs import SpecError, list_model_specs, load_model_spec, match_subgoals
 
-        from ..specs import SpecError, list_model_specs
-
-        if cfg.model is None and f"{info.name}-specific" not in list_model_specs():
-            raise SpecError(f"task {info.name!r} has no built-in critic spec {info.name}-specific: write one (its "
-                            "sub-goals, your signed edges, the prior and the likelihood; models/keydoor-specific.yaml "
-                            "is an example) and pass it with --model my_spec.yaml")
-        spec = load_model_spec(cfg.model or f"{info.name}-specific", graph=cfg.graph)
-        source = f"model spec {cfg.model or info.name + '-specific'!r} for task {info.name!r}"
+        model = cfg.model or f"{info.name}-specific"
+        if cfg.model is None and model not in list_model_specs():
+            raise SpecError(f"task {info.name!r} has no built-in critic spec {model}: write one (its sub-goals, "
+                            "your signed edges, the prior and the likelihood; models/keydoor-specific.yaml is an "
+                            "example) and pass it with --model my_spec.yaml")
+        spec = load_model_spec(model, graph=cfg.graph)
+        source = f"model spec {model!r} for task {info.name!r}"
         if set(spec.subgoals) >= set(names):
             spec = match_subgoals(spec, list(names), source)
         else:       # some of the catalogue's sub-goals: the run's candidates are those (envs/subset.py)
