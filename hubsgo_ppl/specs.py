@@ -87,7 +87,7 @@ from pydantic import Field, field_validator, model_validator  # noqa: E402
 # Pyro, so the validators below import them when they run, not when this module loads.
 from .infer.config import InferenceSpec  # noqa: E402
 
-__all__ += ["ComponentSpec", "InferenceSpec", "ModelSpec", "load_model_spec", "list_model_specs", "match_subgoals"]
+__all__ += ["ComponentSpec", "DEFAULT_LIKELIHOOD", "DEFAULT_PRIOR", "InferenceSpec", "ModelSpec", "load_model_spec", "list_model_specs", "match_subgoals"]
 
 EdgeSign = Literal["positive", "negative", "unknown"]
 
@@ -102,17 +102,48 @@ class ComponentSpec(BaseModel):
         return dict(self.model_extra or {})
 
 
+# What a spec that leaves out ``prior``, ``likelihood`` or ``inference.init`` gets: the critic every
+# shipped maze spec states (docs/results.md, "Critic evidence and defaults"). The human's signed edges
+# become the prior's couplings, a negative field favours small sets, the evidence is the sub-goals
+# that recent successful episodes achieved, and q starts at the prior.
+DEFAULT_PRIOR = {"name": "ising", "strength": 3.0, "field": -2.0}
+DEFAULT_LIKELIHOOD = {"name": "outcome", "flip": 0.02}
+PRIORS_THE_GUIDE_HOLDS = ("bernoulli", "ising")   # priors with natural parameters: init 'prior' works
+
+
 class ModelSpec(StrictModel):
-    """A critic spec; see models/example-specific.yaml."""
+    """A critic spec; see models/example-specific.yaml.
+
+    Left out, ``prior`` and ``likelihood`` are :data:`DEFAULT_PRIOR` and :data:`DEFAULT_LIKELIHOOD`,
+    and ``inference.init`` is ``prior`` where the prior is one the guide can start at
+    (:data:`PRIORS_THE_GUIDE_HOLDS`), ``edges`` otherwise; every other inference setting keeps its
+    :class:`InferenceSpec` default.
+    """
 
     name: str
     task: str | None = None
     subgoals: list[str]
     graph: Literal["specific", "fully_connected", "independent"] = "specific"
     edges: list[tuple[str, str, EdgeSign]] = Field(default_factory=list)
-    prior: ComponentSpec = Field(default_factory=lambda: ComponentSpec(name="bernoulli"))
-    likelihood: ComponentSpec = Field(default_factory=lambda: ComponentSpec(name="gaussian"))
-    inference: InferenceSpec = Field(default_factory=InferenceSpec)
+    prior: ComponentSpec = Field(default_factory=lambda: ComponentSpec(**DEFAULT_PRIOR))
+    likelihood: ComponentSpec = Field(default_factory=lambda: ComponentSpec(**DEFAULT_LIKELIHOOD))
+    inference: InferenceSpec = Field(default_factory=lambda: InferenceSpec(init="prior"))
+
+    @model_validator(mode="before")
+    @classmethod
+    def _default_init(cls, data: Any) -> Any:
+        """``inference.init`` left out: ``prior`` if the guide can start at the prior, else ``edges``."""
+        if not isinstance(data, dict):
+            return data
+        inference = data.get("inference")
+        if inference is None:
+            inference = {}
+        if not isinstance(inference, dict) or "init" in inference:
+            return data
+        prior = data.get("prior", DEFAULT_PRIOR)
+        name = prior.get("name") if isinstance(prior, dict) else getattr(prior, "name", None)
+        init = "prior" if name in PRIORS_THE_GUIDE_HOLDS else "edges"
+        return {**data, "inference": {**inference, "init": init}}
 
     @field_validator("subgoals")
     @classmethod

@@ -15,7 +15,8 @@ BASE = {
     "edges": [["a", "b", "positive"], ["b", "c", "negative"]],
     "prior": {"name": "bernoulli", "p": 0.5},
     "likelihood": {"name": "gaussian", "scale": 1.0},
-    "inference": {"lr": 0.05, "burn_in": 32, "num_samples": 64, "kernel": "single_site", "baseline_beta": 0.9},
+    "inference": {"lr": 0.05, "burn_in": 32, "num_samples": 64, "kernel": "single_site", "baseline_beta": 0.9,
+                  "init": "edges"},
 }
 
 
@@ -105,3 +106,28 @@ def test_a_spec_in_its_own_order_trains_on_the_catalogue_order(tmp_path):
     shipped = resolve(RunConfig(task="keydoor", agent="hubsgo"))
     assert mine["model_spec"]["subgoals"] == shipped["model_spec"]["subgoals"]
     assert mine["model_spec"]["edges"] == shipped["model_spec"]["edges"]
+
+
+def test_a_spec_that_leaves_out_prior_likelihood_and_inference_gets_the_shipped_maze_critic(tmp_path):
+    """Only sub-goals and edges: the same critic as keydoor-specific, which states every setting."""
+    shipped = load_model_spec("keydoor-specific")
+    data = {"name": shipped.name, "task": shipped.task, "subgoals": list(shipped.subgoals),
+            "edges": [list(e) for e in shipped.edges]}
+    path = tmp_path / "mine.yaml"
+    path.write_text(yaml.safe_dump(data))
+    assert load_model_spec(path).model_dump() == shipped.model_dump()
+    # inference given without init: init still follows the prior
+    data["inference"] = {"lr": 0.1}
+    path.write_text(yaml.safe_dump(data))
+    spec = load_model_spec(path)
+    assert (spec.inference.init, spec.inference.lr) == ("prior", 0.1)
+    # a prior the guide cannot start at: init falls back to the edges, and the critic builds
+    data["prior"] = {"name": "beta_bernoulli", "alpha": 2.0, "beta": 2.0}
+    path.write_text(yaml.safe_dump(data))
+    spec = load_model_spec(path)
+    assert spec.inference.init == "edges"
+    # a stated init is kept
+    data["inference"] = {"init": "edges"}
+    data.pop("prior")
+    path.write_text(yaml.safe_dump(data))
+    assert load_model_spec(path).inference.init == "edges"

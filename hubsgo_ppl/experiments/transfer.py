@@ -141,10 +141,13 @@ def plan_transfer(resolved: dict[str, Any], source: str | Path,
                 f"--init-from {src_dir}: observation modes differ: the source run observes {src_mode!r}, this one "
                 f"{dst_mode!r}; set --set env.obs_mode={src_mode} (or --transfer critic)")
         if src_obs != dst_obs:
+            hint = (" or observe egocentrically in both runs (--set env.obs_mode=egocentric: its shape depends on "
+                    "the sub-goal catalogue only, not on the grid)"
+                    if src_mode != "egocentric" and src["family"] == resolved["family"] == "minigrid" else "")
             raise TransferError(
                 f"--init-from {src_dir}: observation shapes differ: {src['task']} has {src_obs}, {resolved['task']} "
                 f"has {dst_obs}; the high and low levels read observations, so they transfer only between "
-                f"tasks with the same observation shape (the critic alone transfers: --transfer critic)")
+                f"tasks with the same observation shape (the critic alone transfers: --transfer critic){hint}")
         if "low" in chosen and src_n != dst_n:
             raise TransferError(f"--init-from {src_dir}: action counts differ: {src['task']} has {src_n} actions, "
                                 f"{resolved['task']} {dst_n}; leave out the low level (--transfer critic,high)")

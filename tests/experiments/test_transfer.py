@@ -83,6 +83,8 @@ def test_observations_of_another_shape_are_refused_in_one_line(sources, tmp_path
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("hubsgo: error: "), err
     assert "observation shapes differ: keydoor has (35,), twowall has (41,)" in err[0]
+    assert err[0].endswith("or observe egocentrically in both runs (--set env.obs_mode=egocentric: its shape "
+                           "depends on the sub-goal catalogue only, not on the grid)"), err[0]
     assert not out.exists(), "a refused transfer writes nothing"
     for argv, needle in ((["--transfer", "brain"], "--transfer brain: use some of critic, high, low"),
                          (["--agent", "hdqn", "--transfer", "critic"], "cannot transfer the critic")):
