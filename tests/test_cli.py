@@ -136,6 +136,23 @@ def test_a_user_maze_without_a_spec_asks_for_one_and_trains_with_one(capsys, tmp
     assert json.loads((out / "subgoals.json").read_text())["names"] == ["key", "door", "goal"]
 
 
+def test_a_user_maze_whose_goal_cannot_be_reached_is_refused_before_a_run_starts(capsys, tmp_path):
+    (tmp_path / "shut.txt").write_text("#######\n#A.#..#\n#.k#.G#\n#######\n")
+    (tmp_path / "shut.yaml").write_text(yaml.safe_dump({
+        "task": "shut", "family": "minigrid",
+        "options": {"layout": "shut.txt", "legend": {"k": {"type": "key", "color": "red"}}},
+        "subgoals": [{"name": "key", "kind": "carrying", "args": {"type": "key", "color": "red"}},
+                     {"name": "goal", "kind": "goal"}]}))
+    (tmp_path / "shut-spec.yaml").write_text(yaml.safe_dump({
+        "name": "shut-spec", "subgoals": ["key", "goal"], "edges": [["key", "goal", "positive"]]}))
+    out = tmp_path / "run"
+    assert main(["train", str(tmp_path / "shut.yaml"), "--model", str(tmp_path / "shut-spec.yaml"), "--out", str(out),
+                 "--steps", "100", "--no-progress"]) == 2
+    line = _one_error_line(capsys)
+    assert "shut.yaml: the goal (5, 2) cannot be reached from the start (1, 1)" in line
+    assert not out.exists()
+
+
 def test_missing_robosuite_names_the_extra(monkeypatch, capsys, tmp_path):
     for name in [m for m in sys.modules if m.startswith(("robosuite.", "mujoco.", "hubsgo_ppl.envs.robosuite"))]:
         monkeypatch.delitem(sys.modules, name)

@@ -269,6 +269,13 @@ def _start(cfg: RunConfig, out: Path, resume: bool):
     if ckpt_path.exists():
         raise RunError(f"{out} already holds a run; continue it with --resume or choose another --out")
     resolved = resolve(cfg)
+    if resolved["family"] == "minigrid" and Path(str(cfg.task)).suffix in (".yaml", ".yml"):
+        from ..envs.minigrid.bfs import check_reachable
+
+        never = check_reachable(resolved["task_ref"])     # a maze whose goal cannot be reached: SpecError
+        if never:
+            print(f"hubsgo: warning: {cfg.task}: no state the agent can reach achieves {', '.join(never)}; "
+                  "check the layout (a key behind its own door, a walled-in cell)", file=sys.stderr)
     plan = None
     if cfg.init_from is not None:       # every refusal before anything is written
         from .transfer import TransferError, plan_transfer

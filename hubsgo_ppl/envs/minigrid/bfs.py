@@ -23,7 +23,8 @@ from ...specs import SpecError
 from ..subgoals import Catalogue
 from .layout import MazeSpec, MazeState, load_maze_spec
 
-__all__ = ["plan", "plan_or_none", "optimal_steps", "optimal_return", "transition", "holds", "shortest_path_cells"]
+__all__ = ["plan", "plan_or_none", "optimal_steps", "optimal_return", "transition", "holds", "shortest_path_cells",
+           "check_reachable"]
 
 _DIR_VEC = ((1, 0), (0, 1), (-1, 0), (0, -1))
 _MOVES = ("left", "right", "forward")
@@ -267,3 +268,38 @@ def shortest_path_cells(source: Any, slack: int = 0) -> set[tuple[int, int]]:
                 to_goal[s] = to_goal[t] + 1
                 frontier.append(s)
     return {s.pos for s, d in dist.items() if s in to_goal and d + to_goal[s] <= optimum + slack}
+
+
+def check_reachable(source: Any, max_states: int = 300_000) -> list[str]:
+    """Check a maze before training on it: raise :class:`SpecError` (one line) if no sequence of the
+    task's actions takes the agent from its start to the goal, and return the names of the catalogue's
+    sub-goals that hold in no reachable state (a key behind its own door, a cell walled in). A maze
+    with more than ``max_states`` reachable states is not checked, and gives ``[]``."""
+    spec, starts, _ = _resolve(source, None)
+    m = _Maze(spec)
+    names = list(spec.subgoal_names)
+    unmet = set(range(len(names)))
+    seen = set(starts)
+    frontier = deque(starts)
+    terminal = m.lava | {m.goal}
+    goal = False
+    while frontier:
+        s = frontier.popleft()
+        for i in [i for i in unmet if holds(spec, s, i)]:
+            unmet.discard(i)
+        if s.pos in terminal:
+            goal = goal or s.pos == m.goal
+            continue
+        for name in m.actions:
+            t = transition(m, s, name)
+            if t not in seen:
+                seen.add(t)
+                frontier.append(t)
+        if len(seen) > max_states:
+            return []
+    if not goal:
+        raise SpecError(f"{spec.source}: the goal {m.goal} cannot be reached from the start "
+                        f"{starts[0].pos} with the actions {', '.join(m.actions)}; check that every locked "
+                        f"door on the way has its key on the agent's side of it")
+    return [names[i] for i in sorted(unmet)]
+

@@ -106,6 +106,26 @@ def test_unreachable_goal_and_zero_return(tmp_path):
     assert bfs.optimal_return(walled) == 0.0
 
 
+def test_check_reachable_refuses_an_unreachable_goal_and_names_unreachable_subgoals(tmp_path):
+    with pytest.raises(SpecError, match=r"the goal \(4, 1\) cannot be reached from the start \(1, 1\)"):
+        bfs.check_reachable(_user_task(tmp_path, "######\n#A.#G#\n######\n"))
+    # the yellow key lies behind its own door: the door and the goal beyond it are out of reach
+    with pytest.raises(SpecError, match="cannot be reached"):
+        bfs.check_reachable(_user_task(tmp_path, "#######\n#A.Yy.#\n#####G#\n#######\n"))
+    # the red key is walled in: the goal is reachable, the red key never held
+    key = "  - {name: red_key, kind: carrying, args: {type: key, color: red}}\n"
+    cell = "  - {name: corner, kind: at, args: {cell: [5, 2]}}\n"
+    path = _user_task(tmp_path, "#######\n#A...G#\n###.#r#\n#######\n", extra_subgoals=key + cell)
+    assert bfs.check_reachable(path) == ["red_key", "corner"]
+    # past max_states nothing is checked
+    assert bfs.check_reachable(_user_task(tmp_path, "######\n#A.#G#\n######\n"), max_states=1) == []
+
+
+@pytest.mark.parametrize("task", ["keydoor", "fourroom", "threepair", "detour", "vault_moved", "keydoor_incorrect"])
+def test_every_subgoal_of_the_shipped_mazes_is_reachable(task):
+    assert bfs.check_reachable(task) == []
+
+
 def test_goal_beyond_max_steps_gives_zero_return(tmp_path):
     path = _user_task(tmp_path, "#######\n#A...G#\n#######\n", max_steps=3)
     assert bfs.optimal_steps(path) == 4
