@@ -87,7 +87,8 @@ from pydantic import Field, field_validator, model_validator  # noqa: E402
 # Pyro, so the validators below import them when they run, not when this module loads.
 from .infer.config import InferenceSpec  # noqa: E402
 
-__all__ += ["ComponentSpec", "DEFAULT_LIKELIHOOD", "DEFAULT_PRIOR", "InferenceSpec", "ModelSpec", "load_model_spec", "list_model_specs", "match_subgoals"]
+__all__ += ["ComponentSpec", "DEFAULT_LIKELIHOOD", "DEFAULT_PRIOR", "InferenceSpec", "ModelSpec", "load_model_spec",
+            "list_model_specs", "match_subgoals"]
 
 EdgeSign = Literal["positive", "negative", "unknown"]
 
