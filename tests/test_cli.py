@@ -153,6 +153,27 @@ def test_a_user_maze_whose_goal_cannot_be_reached_is_refused_before_a_run_starts
     assert not out.exists()
 
 
+def test_a_spec_that_leaves_the_goal_unlinked_gets_a_note_and_the_shipped_one_does_not(capsys, tmp_path):
+    """With the default prior and evidence, a goal no positive edge reaches stays out of G*; say so."""
+    spec = tmp_path / "keys-only.yaml"
+    spec.write_text(yaml.safe_dump({
+        "name": "keys-only", "subgoals": ["yellow_key", "yellow_door", "blue_key", "blue_door", "goal"],
+        "edges": [["yellow_key", "yellow_door", "positive"], ["blue_key", "blue_door", "positive"],
+                  ["yellow_key", "blue_key", "negative"]]}))
+    assert main(["train", "keydoor", "--model", str(spec), "--out", str(tmp_path / "a"), "--steps", "100",
+                 "--no-progress", *TINY]) == 0
+    err = capsys.readouterr().err
+    assert ("hubsgo: note: model spec 'keys-only' gives goal (the task's goal) no positive edge, so its prior's "
+            "field keeps it out of G*") in err
+    # the evidence at full weight (power 1: 3.9 nats) outweighs the field of -2: no note
+    spec.write_text(spec.read_text() + "likelihood: {name: outcome, power: 1.0}\n")
+    assert main(["train", "keydoor", "--model", str(spec), "--out", str(tmp_path / "b"), "--steps", "100",
+                 "--no-progress", *TINY]) == 0
+    assert "hubsgo: note" not in capsys.readouterr().err
+    assert main(["train", "keydoor", "--out", str(tmp_path / "c"), "--steps", "100", "--no-progress", *TINY]) == 0
+    assert "hubsgo: note" not in capsys.readouterr().err
+
+
 def test_missing_robosuite_names_the_extra(monkeypatch, capsys, tmp_path):
     for name in [m for m in sys.modules if m.startswith(("robosuite.", "mujoco.", "hubsgo_ppl.envs.robosuite"))]:
         monkeypatch.delitem(sys.modules, name)

@@ -144,6 +144,25 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
     return resolved
 
 
+def _unlinked_goals(resolved: dict[str, Any]) -> list[str]:
+    """The catalogue's ``goal`` sub-goals that a ``specific`` spec links to nothing by a positive edge,
+    where its Ising prior's negative field outweighs what the outcome likelihood makes of a sub-goal
+    every success achieves (``power * log((1 - flip) / flip)`` nats): G* then leaves them out
+    (docs/results.md, "How strongly the successes speak")."""
+    from ..infer.likelihoods import get_likelihood
+
+    spec = resolved.get("model_spec")
+    prior, lik = ((spec or {}).get(k) or {} for k in ("prior", "likelihood"))
+    if not spec or spec.get("graph") != "specific" or prior.get("name") != "ising" or lik.get("name") != "outcome":
+        return []
+    outcome = get_likelihood("outcome", **{k: v for k, v in lik.items() if k != "name"})
+    if outcome.power * math.log((1 - outcome.flip) / outcome.flip) > -float(prior.get("field", 0.0)):
+        return []
+    linked = {end for u, v, sign in spec.get("edges", []) if sign == "positive" for end in (u, v)}
+    goals = [d.name for d in get_task(resolved["task_ref"]).catalogue.subgoals if d.kind == "goal"]
+    return [g for g in goals if g in spec["subgoals"] and g not in linked]
+
+
 def _build(resolved: dict[str, Any]):
     register()
     # built-in name or catalogue path; with a ``subgoals`` subset, the task with only those sub-goals
@@ -276,6 +295,11 @@ def _start(cfg: RunConfig, out: Path, resume: bool):
         if never:
             print(f"hubsgo: warning: {cfg.task}: no state the agent can reach achieves {', '.join(never)}; "
                   "check the layout (a key behind its own door, a walled-in cell)", file=sys.stderr)
+    unlinked = _unlinked_goals(resolved)
+    if unlinked:
+        print(f"hubsgo: note: model spec {resolved['model']!r} gives {', '.join(unlinked)} (the task's goal) no "
+              "positive edge, so its prior's field keeps it out of G*; link the last sub-goal of each route "
+              "to it (e.g. [a_door, goal, positive])", file=sys.stderr)
     plan = None
     if cfg.init_from is not None:       # every refusal before anything is written
         from .transfer import TransferError, plan_transfer
