@@ -2,7 +2,8 @@
 
 A sweep file cannot express this (each target run starts from the source run of its seed), so this
 script runs it. For each pair (``keydoor -> keydoor_moved``, ``fourroom -> fourroom_moved``,
-``threepair -> threepair_moved``; ``vault -> vault_moved`` with ``--sources vault``) and each
+``threepair -> threepair_moved``; ``vault -> vault_moved`` and ``annex -> annex_wide`` with
+``--sources vault annex``) and each
 seed: a HUBS-GO run on the source task at its budget, then runs on the target task at its budget,
 one per arm:
 
@@ -37,6 +38,7 @@ from measure_common import SMOKE, WINDOW, finish, guard_settings, parser, run_jo
 
 ROOT = Path(__file__).resolve().parents[1]
 PAIRS = {"keydoor": "keydoor_moved", "fourroom": "fourroom_moved", "threepair": "threepair_moved",
+         "annex": "annex_wide",
          "vault": "vault_moved"}
 DEFAULT_SOURCES = ["keydoor", "fourroom", "threepair"]     # the pairs of the transfer tables (docs/results.md)
 ARMS = {"scratch": None, "critic": ["critic"], "high": ["high"], "low": ["low"], "all": ["critic", "high", "low"],
