@@ -15,6 +15,10 @@ TINY = ["high.learning_starts=8", "high.batch_size=8", "low.learning_starts=64",
 CLI_TINY = [a for item in TINY for a in ("--set", item)]
 
 
+#: the pairs whose grids differ in size observe egocentrically (the symbolic observation's shape is the grid's)
+EGO = {"annex": ["env.obs_mode=egocentric"]}
+
+
 def _source(root, task, seed=0):
     # a TD likelihood, so that the source critic has learned something in a tiny budget
     from hubsgo_ppl.specs import load_model_spec
@@ -24,23 +28,25 @@ def _source(root, task, seed=0):
     spec["likelihood"] = {"name": "gaussian"}
     path = root / f"{task}-td.yaml"
     path.write_text(yaml.safe_dump(spec))
-    train(RunConfig(task=task, model=str(path), steps=900, seed=seed, overrides=TINY), out, progress=False)
+    train(RunConfig(task=task, model=str(path), steps=900, seed=seed, overrides=TINY + EGO.get(task, [])), out,
+          progress=False)
     return out
 
 
 @pytest.fixture(scope="module")
 def sources(tmp_path_factory):
     root = tmp_path_factory.mktemp("transfer")
-    return {task: _source(root, task) for task in ("keydoor", "fourroom", "threepair", "vault")}
+    return {task: _source(root, task) for task in ("keydoor", "fourroom", "threepair", "vault", "annex")}
 
 
 @pytest.mark.parametrize("source, target", [("keydoor", "keydoor_moved"), ("fourroom", "fourroom_moved"),
-                                            ("threepair", "threepair_moved"), ("vault", "vault_moved")])
+                                            ("threepair", "threepair_moved"), ("vault", "vault_moved"),
+                                            ("annex", "annex_wide")])
 def test_tiny_transfer_to_the_similar_task(sources, tmp_path, source, target):
     src = load_checkpoint(sources[source] / "checkpoint.pt")["agent"]
     assert src["filter"]["critic"]["num_updates"] > 0
     out = tmp_path / target
-    cfg = RunConfig(task=target, steps=600, seed=2, overrides=TINY, init_from=str(sources[source]))
+    cfg = RunConfig(task=target, steps=600, seed=2, overrides=TINY + EGO.get(source, []), init_from=str(sources[source]))
     train(cfg, out, progress=False, max_episodes=0)          # the run's state before its first episode
     start = load_checkpoint(out / "checkpoint.pt")
     agent = start["agent"]
