@@ -38,6 +38,10 @@ def _fmt_ranking(table: dict[str, Any]) -> str:
         tie = "  ≈ tie with the one above" if r.get("near_tie") and i > 1 else ""
         lines.append(f"{i:>4}  {r['prob']:>9.4f}  {exact:>8}  {{{', '.join(r['subgoals'])}}}{tie}")
     lines.append("marginals P(w=1): " + ", ".join(f"{n}={p:.2f}" for n, p in table["marginals"].items()))
+    if table["ranking"] and not table["ranking"][0]["subgoals"]:
+        lines.append("the most probable set is empty: no sub-goal's evidence outweighs the prior's pull towards "
+                     "small sets; `hubsgo review RUN` lists what the recent successes achieved, and positive edges "
+                     "in the spec let those sub-goals in")
     return "\n".join(lines)
 
 

@@ -46,6 +46,17 @@ def test_train_subgoals_evaluate_round_trip(tmp_path, capsys):
     assert json.loads((run / "eval.json").read_text())["break_cycles"] is False
 
 
+def test_an_empty_most_probable_set_is_explained_under_the_table():
+    from hubsgo_ppl.cli import _fmt_ranking
+
+    table = {"num_samples": 10, "marginals": {"a": 0.1, "b": 0.2},
+             "ranking": [{"subgoals": [], "prob": 0.7}, {"subgoals": ["a"], "prob": 0.1}]}
+    text = _fmt_ranking(table)
+    assert text.splitlines()[-1].startswith("the most probable set is empty: no sub-goal's evidence outweighs")
+    table["ranking"].reverse()
+    assert "the most probable set is empty" not in _fmt_ranking(table)
+
+
 @pytest.mark.parametrize("argv, needle", [
     (["train", "nope"], "unknown task 'nope'"),
     (["train", "keydoor", "--model", "fourroom-specific"], "model spec 'fourroom-specific'"),
