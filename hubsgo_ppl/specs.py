@@ -109,16 +109,15 @@ class ComponentSpec(BaseModel):
 # that recent successful episodes achieved, and q starts at the prior.
 DEFAULT_PRIOR = {"name": "ising", "strength": 3.0, "field": -2.0}
 DEFAULT_LIKELIHOOD = {"name": "outcome", "flip": 0.02}
-PRIORS_THE_GUIDE_HOLDS = ("bernoulli", "ising")   # priors with natural parameters: init 'prior' works
 
 
 class ModelSpec(StrictModel):
     """A critic spec; see models/example-specific.yaml.
 
     Left out, ``prior`` and ``likelihood`` are :data:`DEFAULT_PRIOR` and :data:`DEFAULT_LIKELIHOOD`,
-    and ``inference.init`` is ``prior`` where the prior is one the guide can start at
-    (:data:`PRIORS_THE_GUIDE_HOLDS`), ``edges`` otherwise; every other inference setting keeps its
-    :class:`InferenceSpec` default.
+    and ``inference.init`` is ``prior`` where the guide can start at the prior (it has natural
+    parameters, as bernoulli and ising do), ``edges`` otherwise; every other inference setting keeps
+    its :class:`InferenceSpec` default.
     """
 
     name: str
@@ -128,23 +127,7 @@ class ModelSpec(StrictModel):
     edges: list[tuple[str, str, EdgeSign]] = Field(default_factory=list)
     prior: ComponentSpec = Field(default_factory=lambda: ComponentSpec(**DEFAULT_PRIOR))
     likelihood: ComponentSpec = Field(default_factory=lambda: ComponentSpec(**DEFAULT_LIKELIHOOD))
-    inference: InferenceSpec = Field(default_factory=lambda: InferenceSpec(init="prior"))
-
-    @model_validator(mode="before")
-    @classmethod
-    def _default_init(cls, data: Any) -> Any:
-        """``inference.init`` left out: ``prior`` if the guide can start at the prior, else ``edges``."""
-        if not isinstance(data, dict):
-            return data
-        inference = data.get("inference")
-        if inference is None:
-            inference = {}
-        if not isinstance(inference, dict) or "init" in inference:
-            return data
-        prior = data.get("prior", DEFAULT_PRIOR)
-        name = prior.get("name") if isinstance(prior, dict) else getattr(prior, "name", None)
-        init = "prior" if name in PRIORS_THE_GUIDE_HOLDS else "edges"
-        return {**data, "inference": {**inference, "init": init}}
+    inference: InferenceSpec = Field(default_factory=InferenceSpec)
 
     @field_validator("subgoals")
     @classmethod
@@ -193,7 +176,9 @@ class ModelSpec(StrictModel):
         from .graph import SubgoalGraph
         from .infer.priors import get_prior
 
-        get_prior(self.prior.name, SubgoalGraph(self.subgoals), **self.prior.params())
+        prior = get_prior(self.prior.name, SubgoalGraph(self.subgoals), **self.prior.params())
+        if "init" not in self.inference.model_fields_set:    # left out: start at the prior where the guide can
+            self.inference.init = "prior" if prior.natural_params() is not None else "edges"
         return self
 
 

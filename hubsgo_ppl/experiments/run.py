@@ -147,7 +147,7 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
 def _unlinked_goals(resolved: dict[str, Any]) -> list[str]:
     """The catalogue's ``goal`` sub-goals that a ``specific`` spec links to nothing by a positive edge,
     where its Ising prior's negative field outweighs what the outcome likelihood makes of a sub-goal
-    every success achieves (``power * log((1 - flip) / flip)`` nats): G* then leaves them out
+    every success achieves (``OutcomeLikelihood.mismatch_nats``): G* then leaves them out
     (docs/results.md, "How strongly the successes speak")."""
     from ..infer.likelihoods import get_likelihood
 
@@ -156,7 +156,7 @@ def _unlinked_goals(resolved: dict[str, Any]) -> list[str]:
     if not spec or spec.get("graph") != "specific" or prior.get("name") != "ising" or lik.get("name") != "outcome":
         return []
     outcome = get_likelihood("outcome", **{k: v for k, v in lik.items() if k != "name"})
-    if outcome.power * math.log((1 - outcome.flip) / outcome.flip) > -float(prior.get("field", 0.0)):
+    if outcome.mismatch_nats > -float(prior.get("field", 0.0)):
         return []
     linked = {end for u, v, sign in spec.get("edges", []) if sign == "positive" for end in (u, v)}
     goals = [d.name for d in get_task(resolved["task_ref"]).catalogue.subgoals if d.kind == "goal"]

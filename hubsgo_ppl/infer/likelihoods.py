@@ -154,6 +154,12 @@ class OutcomeLikelihood(Likelihood):
     def params(self):
         return {"flip": self.flip, "power": self.power}
 
+    @property
+    def mismatch_nats(self) -> float:
+        """What each sub-goal that ``w`` sets differently from an episode costs: ``power * log((1 - flip)
+        / flip)`` nats, the most the evidence can pull one sub-goal against the prior."""
+        return self.power * (math.log1p(-self.flip) - math.log(self.flip))
+
     def log_likelihood(self, w: torch.Tensor, outcomes: torch.Tensor) -> torch.Tensor:
         if outcomes.dim() != 2 or outcomes.shape[0] == 0 or outcomes.shape[1] != w.shape[-1]:
             raise ValueError(f"outcomes must have shape (E >= 1, {w.shape[-1]}), got {tuple(outcomes.shape)}")

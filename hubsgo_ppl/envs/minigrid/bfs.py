@@ -276,30 +276,26 @@ def check_reachable(source: Any, max_states: int = 300_000) -> list[str]:
     sub-goals that hold in no reachable state (a key behind its own door, a cell walled in). A maze
     with more than ``max_states`` reachable states is not checked, and gives ``[]``."""
     spec, starts, _ = _resolve(source, None)
-    m = _Maze(spec)
     names = list(spec.subgoal_names)
+    goal = spec.layout.goal
     unmet = set(range(len(names)))
-    seen = set(starts)
-    frontier = deque(starts)
-    terminal = m.lava | {m.goal}
-    goal = False
-    while frontier:
-        s = frontier.popleft()
-        for i in [i for i in unmet if holds(spec, s, i)]:
-            unmet.discard(i)
-        if s.pos in terminal:
-            goal = goal or s.pos == m.goal
-            continue
-        for name in m.actions:
-            t = transition(m, s, name)
-            if t not in seen:
-                seen.add(t)
-                frontier.append(t)
-        if len(seen) > max_states:
-            return []
-    if not goal:
-        raise SpecError(f"{spec.source}: the goal {m.goal} cannot be reached from the start "
-                        f"{starts[0].pos} with the actions {', '.join(m.actions)}; check that every locked "
-                        f"door on the way has its key on the agent's side of it")
-    return [names[i] for i in sorted(unmet)]
+    reached: list[bool] = []
 
+    def visit(s: MazeState) -> bool:    # every reachable state once; never "done", so the search is whole
+        unmet.difference_update([i for i in unmet if holds(spec, s, i)])
+        if s.pos == goal:
+            reached.append(True)
+        return False
+
+    for start in starts:        # one per start direction of a random one; with turns, the first reaches all
+        try:
+            _bfs(spec, start, visit, max_states=max_states)
+        except RuntimeError:
+            return []
+        if reached:
+            break
+    if not reached:
+        raise SpecError(f"{spec.source}: the goal {goal} cannot be reached from the start "
+                        f"{starts[0].pos} with the actions {', '.join(spec.options.actions)}; check that every "
+                        f"locked door on the way has its key on the agent's side of it")
+    return [names[i] for i in sorted(unmet)]
