@@ -164,6 +164,26 @@ def test_a_user_maze_whose_goal_cannot_be_reached_is_refused_before_a_run_starts
     assert not out.exists()
 
 
+def test_a_user_maze_too_large_to_search_trains_with_a_note(capsys, tmp_path, monkeypatch):
+    """Past its cap on states the reachability search checks nothing, and says so in one line."""
+    from hubsgo_ppl.envs.minigrid import bfs
+
+    real = bfs.check_reachable
+    monkeypatch.setattr(bfs, "check_reachable", lambda source: real(source, max_states=1))
+    (tmp_path / "open.txt").write_text("#####\n#A.G#\n#####\n")
+    (tmp_path / "open.yaml").write_text(yaml.safe_dump({
+        "task": "open", "family": "minigrid", "options": {"layout": "open.txt"},
+        "subgoals": [{"name": "mid", "kind": "at", "args": {"cell": [2, 1]}}, {"name": "goal", "kind": "goal"}]}))
+    (tmp_path / "open-spec.yaml").write_text(yaml.safe_dump({
+        "name": "open-spec", "subgoals": ["mid", "goal"], "edges": [["mid", "goal", "positive"]]}))
+    assert main(["train", str(tmp_path / "open.yaml"), "--model", str(tmp_path / "open-spec.yaml"),
+                 "--out", str(tmp_path / "run"), "--steps", "50", "--no-progress", *TINY]) == 0
+    notes = [line for line in capsys.readouterr().err.splitlines() if "too many states" in line]
+    assert notes == [f"hubsgo: note: {tmp_path / 'open.yaml'}: the maze has too many states to check before "
+                     "training that its goal and sub-goals can be reached; training without that check"]
+    assert (tmp_path / "run" / "metrics.csv").exists()
+
+
 def test_a_spec_that_leaves_the_goal_unlinked_gets_a_note_and_the_shipped_one_does_not(capsys, tmp_path):
     """With the default prior and evidence, a goal no positive edge reaches stays out of G*; say so."""
     spec = tmp_path / "keys-only.yaml"

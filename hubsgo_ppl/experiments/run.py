@@ -292,7 +292,10 @@ def _start(cfg: RunConfig, out: Path, resume: bool):
         from ..envs.minigrid.bfs import check_reachable
 
         never = check_reachable(resolved["task_ref"])     # a maze whose goal cannot be reached: SpecError
-        if never:
+        if never is None:
+            print(f"hubsgo: note: {cfg.task}: the maze has too many states to check before training that its goal "
+                  "and sub-goals can be reached; training without that check", file=sys.stderr)
+        elif never:
             print(f"hubsgo: warning: {cfg.task}: no state the agent can reach achieves {', '.join(never)}; "
                   "check the layout (a key behind its own door, a walled-in cell)", file=sys.stderr)
     unlinked = _unlinked_goals(resolved)

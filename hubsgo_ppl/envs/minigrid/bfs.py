@@ -270,11 +270,11 @@ def shortest_path_cells(source: Any, slack: int = 0) -> set[tuple[int, int]]:
     return {s.pos for s, d in dist.items() if s in to_goal and d + to_goal[s] <= optimum + slack}
 
 
-def check_reachable(source: Any, max_states: int = 300_000) -> list[str]:
+def check_reachable(source: Any, max_states: int = 300_000) -> list[str] | None:
     """Check a maze before training on it: raise :class:`SpecError` (one line) if no sequence of the
     task's actions takes the agent from its start to the goal, and return the names of the catalogue's
     sub-goals that hold in no reachable state (a key behind its own door, a cell walled in). A maze
-    with more than ``max_states`` reachable states is not checked, and gives ``[]``."""
+    with more than ``max_states`` reachable states is not checked, and gives ``None``."""
     spec, starts, _ = _resolve(source, None)
     names = list(spec.subgoal_names)
     goal = spec.layout.goal
@@ -291,7 +291,7 @@ def check_reachable(source: Any, max_states: int = 300_000) -> list[str]:
         try:
             _bfs(spec, start, visit, max_states=max_states)
         except RuntimeError:
-            return []
+            return None
         if reached:
             break
     if not reached:
