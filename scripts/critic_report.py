@@ -39,6 +39,7 @@ ROUTES = {
     "fourroom": [{"door_top", "door_right", "goal"}, {"door_left", "door_bottom", "goal"}],
     "vault": [set(p + ["green_door", "goal"]) for p in _PAIR],
     "detour": [{"red_key", "red_door", "goal"}, {"purple_key", "purple_door", "goal"}],
+    "gallery": [{gap, "yellow_key", "yellow_door", "goal"} for gap in ("gap_north", "gap_south")],
 }
 ROUTES["vault_moved"] = ROUTES["vault"]
 
