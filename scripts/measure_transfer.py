@@ -38,7 +38,7 @@ from measure_common import SMOKE, WINDOW, finish, guard_settings, parser, run_jo
 
 ROOT = Path(__file__).resolve().parents[1]
 PAIRS = {"keydoor": "keydoor_moved", "fourroom": "fourroom_moved", "threepair": "threepair_moved",
-         "annex": "annex_wide",
+         "annex": "annex_wide", "gallery": "gallery_turned",
          "vault": "vault_moved"}
 DEFAULT_SOURCES = ["keydoor", "fourroom", "threepair"]     # the pairs of the transfer tables (docs/results.md)
 ARMS = {"scratch": None, "critic": ["critic"], "high": ["high"], "low": ["low"], "all": ["critic", "high", "low"],
