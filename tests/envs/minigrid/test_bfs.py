@@ -122,7 +122,7 @@ def test_check_reachable_refuses_an_unreachable_goal_and_names_unreachable_subgo
 
 
 @pytest.mark.parametrize("task", ["keydoor", "fourroom", "threepair", "detour", "vault_moved", "keydoor_incorrect",
-                                  "annex_wide", "gallery"])
+                                  "annex_wide", "gallery", "gallery_turned"])
 def test_every_subgoal_of_the_shipped_mazes_is_reachable(task):
     assert bfs.check_reachable(task) == []
 
@@ -183,7 +183,7 @@ def test_transition_matches_minigrid_on_random_rollouts(tmp_path):
                                          ("vault", 26), ("vault_moved", 33), ("keydoor_n9", 19),
                                          ("keydoor_n17", 19), ("keydoor_n33", 19), ("keydoor_n65", 19),
                                          ("detour", 20), ("annex", 14), ("annex_wide", 18),
-                                         ("gallery", 19)])
+                                         ("gallery", 19), ("gallery_turned", 27)])
 def test_new_mazes_have_their_bfs_optimum(task, steps):
     assert optimal_steps(task) == steps
 
