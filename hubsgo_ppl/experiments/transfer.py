@@ -56,6 +56,9 @@ SCHEDULES = {"critic": ("filter_start", "filter_end", "filter_fraction"),
 #: similar task"). From scratch the critic's confidence grows with the agent's, and the two tie.
 TRANSFER_DEFAULTS = {"critic": {"filter_fallback": "completion"}}
 _HIERARCHICAL = ("hubsgo", "hdqn")
+#: MiniGrid observation modes whose entries name absolute cells, so that they transfer only between
+#: grids of one size
+_CELL_MODES = ("symbolic", "image")
 
 
 @dataclass
@@ -76,12 +79,15 @@ def config_subgoals(config: dict[str, Any]) -> list[str]:
     return list(get_task(config["task_ref"]).catalogue.names)
 
 
-def _obs_and_actions(config: dict[str, Any]) -> tuple[tuple[int, ...], int | None, str | None]:
+def _obs_and_actions(config: dict[str, Any]) -> tuple[tuple[int, ...], int | None, str | None, tuple[int, int] | None]:
+    """The observation shape, action count, observation mode and grid size (width, height; None off
+    the grid) of the env a run config builds."""
     env = make_subset(config["task_ref"], config.get("subgoals"), **config["hyper"].get("env", {}))
     try:
         n = getattr(env.action_space, "n", None)
-        return (tuple(int(d) for d in env.observation_space.shape), None if n is None else int(n),
-                getattr(env.unwrapped, "obs_mode", None))
+        mode = getattr(env.unwrapped, "obs_mode", None)
+        size = (int(env.unwrapped.width), int(env.unwrapped.height)) if mode in _CELL_MODES else None
+        return tuple(int(d) for d in env.observation_space.shape), None if n is None else int(n), mode, size
     finally:
         env.close()
 
@@ -134,8 +140,8 @@ def plan_transfer(resolved: dict[str, Any], source: str | Path,
     if not chosen:
         raise TransferError(f"--init-from {src_dir}: nothing to transfer: {why['high']}")
     if "high" in chosen or "low" in chosen:
-        src_obs, src_n, src_mode = _obs_and_actions(src)
-        dst_obs, dst_n, dst_mode = _obs_and_actions(resolved)
+        src_obs, src_n, src_mode, src_size = _obs_and_actions(src)
+        dst_obs, dst_n, dst_mode, dst_size = _obs_and_actions(resolved)
         if src_mode != dst_mode:
             raise TransferError(
                 f"--init-from {src_dir}: observation modes differ: the source run observes {src_mode!r}, this one "
@@ -148,6 +154,13 @@ def plan_transfer(resolved: dict[str, Any], source: str | Path,
                 f"--init-from {src_dir}: observation shapes differ: {src['task']} has {src_obs}, {resolved['task']} "
                 f"has {dst_obs}; the high and low levels read observations, so they transfer only between "
                 f"tasks with the same observation shape (the critic alone transfers: --transfer critic){hint}")
+        if src_mode in _CELL_MODES and src_size != dst_size:
+            # the same length, but each entry names another cell: a 13x11 grid against an 11x13 one
+            raise TransferError(
+                f"--init-from {src_dir}: the grids differ in size: {src['task']} is {src_size[0]}x{src_size[1]}, "
+                f"{resolved['task']} {dst_size[0]}x{dst_size[1]}; the {src_mode} observation names absolute cells, so a "
+                f"network trained on one grid would misread the other; transfer the critic alone (--transfer critic) "
+                f"or observe egocentrically in both runs (--set env.obs_mode=egocentric)")
         if "low" in chosen and src_n != dst_n:
             raise TransferError(f"--init-from {src_dir}: action counts differ: {src['task']} has {src_n} actions, "
                                 f"{resolved['task']} {dst_n}; leave out the low level (--transfer critic,high)")

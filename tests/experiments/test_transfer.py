@@ -176,6 +176,24 @@ def test_a_transferred_critic_falls_back_to_the_completion_unless_the_user_sets_
     assert _loop(tmp_path / "all")["filter_fallback"] == "completion"
 
 
+def test_grids_of_another_size_with_an_observation_of_the_same_length_are_refused(tmp_path, capsys):
+    """Gallery (13x11) and Gallery-Turned (11x13) have symbolic observations of one length whose
+    entries name other cells: the networks are refused in one line, the critic alone transfers."""
+    src = tmp_path / "src"
+    assert main(["train", "gallery", "--out", str(src), "--steps", "300", "--no-progress", *CLI_TINY]) == 0
+    capsys.readouterr()
+    out = tmp_path / "turned"
+    assert main(["train", "gallery_turned", "--init-from", str(src), "--out", str(out), "--steps", "300",
+                 "--no-progress", *CLI_TINY]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("hubsgo: error: "), err
+    assert "the grids differ in size: gallery is 13x11, gallery_turned 11x13; the symbolic observation" in err[0]
+    assert not out.exists()
+    assert main(["train", "gallery_turned", "--init-from", str(src), "--transfer", "critic", "--out", str(out),
+                 "--steps", "300", "--no-progress", *CLI_TINY]) == 0
+    assert yaml.safe_load((out / "config.yaml").read_text())["init_from"]["parts"] == ["critic"]
+
+
 def test_other_observation_modes_are_refused_in_one_line(sources, tmp_path, capsys):
     out = tmp_path / "ego"
     assert main(["train", "keydoor_moved", "--init-from", str(sources["keydoor"]), "--out", str(out),
