@@ -79,7 +79,8 @@ def config_subgoals(config: dict[str, Any]) -> list[str]:
     return list(get_task(config["task_ref"]).catalogue.names)
 
 
-def _obs_and_actions(config: dict[str, Any]) -> tuple[tuple[int, ...], int | None, str | None, tuple[int, int] | None]:
+def _obs_and_actions(config: dict[str, Any]
+                     ) -> tuple[tuple[int, ...], int | None, str | None, tuple[int, int] | None]:
     """The observation shape, action count, observation mode and grid size (width, height; None off
     the grid) of the env a run config builds."""
     env = make_subset(config["task_ref"], config.get("subgoals"), **config["hyper"].get("env", {}))
