@@ -184,6 +184,25 @@ def test_a_user_maze_too_large_to_search_trains_with_a_note(capsys, tmp_path, mo
     assert (tmp_path / "run" / "metrics.csv").exists()
 
 
+def test_a_spec_that_leaves_out_the_goal_is_warned_in_train_and_in_revise(capsys, tmp_path):
+    """Without the task's goal among the candidates the high level can never choose it: say so."""
+    spec = tmp_path / "no-goal.yaml"
+    spec.write_text(yaml.safe_dump({
+        "name": "no-goal", "subgoals": ["yellow_key", "yellow_door", "blue_key"],
+        "edges": [["yellow_key", "yellow_door", "positive"], ["yellow_key", "blue_key", "negative"]]}))
+    warning = ("hubsgo: warning: model spec 'no-goal' leaves out goal (the task's goal): the high level can never "
+               "choose it, so the agent reaches it only by chance")
+    assert main(["train", "keydoor", "--model", str(spec), "--out", str(tmp_path / "a"), "--steps", "100",
+                 "--no-progress", *TINY]) == 0
+    assert [line for line in capsys.readouterr().err.splitlines() if "leaves out" in line][0].startswith(warning)
+    run = tmp_path / "b"
+    assert main(["train", "keydoor", "--out", str(run), "--steps", "300", "--stop-at", "100",
+                 "--no-progress", *TINY]) == 0
+    assert "leaves out" not in capsys.readouterr().err          # the shipped spec lists the goal
+    assert main(["revise", str(run), "--model", str(spec), "--no-progress"]) == 0
+    assert [line for line in capsys.readouterr().err.splitlines() if "leaves out" in line][0].startswith(warning)
+
+
 def test_a_spec_that_leaves_the_goal_unlinked_gets_a_note_and_the_shipped_one_does_not(capsys, tmp_path):
     """With the default prior and evidence, a goal no positive edge reaches stays out of G*; say so."""
     spec = tmp_path / "keys-only.yaml"

@@ -144,6 +144,21 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
     return resolved
 
 
+def goals_left_out(task_ref: str, subgoals: list[str] | None) -> list[str]:
+    """The catalogue's ``goal`` sub-goals that a run's candidate set (a spec's ``subgoals``) leaves out:
+    the high level can never choose them, so the agent reaches the task's goal only by chance."""
+    if not subgoals:
+        return []
+    return [d.name for d in get_task(task_ref).catalogue.subgoals if d.kind == "goal" and d.name not in subgoals]
+
+
+def warn_goals_left_out(spec_name: str, missing: list[str]) -> None:
+    if missing:
+        print(f"hubsgo: warning: model spec {spec_name!r} leaves out {', '.join(missing)} (the task's goal): the high "
+              "level can never choose it, so the agent reaches it only by chance; add it to subgoals and link the "
+              "last sub-goal of each route to it", file=sys.stderr)
+
+
 def _unlinked_goals(resolved: dict[str, Any]) -> list[str]:
     """The catalogue's ``goal`` sub-goals that a ``specific`` spec links to nothing by a positive edge,
     where its Ising prior's negative field outweighs what the outcome likelihood makes of a sub-goal
@@ -328,6 +343,7 @@ def _start(cfg: RunConfig, out: Path, resume: bool):
         left = [n for n in get_task(resolved["task_ref"]).catalogue.names if n not in resolved["subgoals"]]
         print(f"hubsgo: model spec {resolved['model']!r} lists {len(resolved['subgoals'])} of the sub-goals of task "
               f"{resolved['task']!r}; not candidates in this run: {', '.join(left)}", file=sys.stderr)
+        warn_goals_left_out(resolved["model"], goals_left_out(resolved["task_ref"], resolved["subgoals"]))
     try:
         env, agent = _build(resolved)
     except BaseException as exc:
