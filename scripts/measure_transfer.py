@@ -2,8 +2,8 @@
 
 A sweep file cannot express this (each target run starts from the source run of its seed), so this
 script runs it. For each pair (``keydoor -> keydoor_moved``, ``fourroom -> fourroom_moved``,
-``threepair -> threepair_moved``; ``vault -> vault_moved`` and ``annex -> annex_wide`` with
-``--sources vault annex``) and each
+``threepair -> threepair_moved``; ``vault -> vault_moved``, ``annex -> annex_wide`` and
+``gallery -> gallery_turned`` with ``--sources vault annex gallery``) and each
 seed: a HUBS-GO run on the source task at its budget, then runs on the target task at its budget,
 one per arm:
 

@@ -56,7 +56,7 @@ from ..envs import get_task
 from ..envs.subset import catalogue_order, check_subset
 from .io import truncate_csv, write_json, write_text, write_yaml
 from .run import (CHECKPOINT, EPISODE_LOGS, REVISIONS_CSV, RunConfig, RunError, _build, _run_checkpoint, _save,
-                  goals_left_out, plot_run_curve, train, warn_goals_left_out)
+                  plot_run_curve, train, warn_goals_left_out)
 from .remap import TransferError, revise_agent_state
 
 __all__ = ["revise", "apply_revision", "load_revision_spec", "spec_changes", "objective_unchanged", "REVISIONS_DIR", "REVISION_FIELDS"]
@@ -163,7 +163,7 @@ def apply_revision(run_dir: str | Path, new_spec: str | Path, steps: int | None 
     new["revision"] = number
 
     changes = spec_changes(old["model_spec"], new["model_spec"])
-    warn_goals_left_out(spec.name, goals_left_out(old["task_ref"], new.get("subgoals")))
+    warn_goals_left_out(spec.name, old["task_ref"], new.get("subgoals"))
     env, agent = _build(new)
     with contextlib.closing(env):
         try:

@@ -144,15 +144,15 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
     return resolved
 
 
-def goals_left_out(task_ref: str, subgoals: list[str] | None) -> list[str]:
-    """The catalogue's ``goal`` sub-goals that a run's candidate set (a spec's ``subgoals``) leaves out:
-    the high level can never choose them, so the agent reaches the task's goal only by chance."""
-    if not subgoals:
-        return []
-    return [d.name for d in get_task(task_ref).catalogue.subgoals if d.kind == "goal" and d.name not in subgoals]
+def _task_goals(task_ref: str) -> list[str]:
+    """The names of the task catalogue's ``goal`` sub-goals."""
+    return [d.name for d in get_task(task_ref).catalogue.subgoals if d.kind == "goal"]
 
 
-def warn_goals_left_out(spec_name: str, missing: list[str]) -> None:
+def warn_goals_left_out(spec_name: str, task_ref: str, subgoals: list[str] | None) -> None:
+    """One warning line when a run's candidate set (a spec's ``subgoals``; None: the whole catalogue)
+    leaves out the task's goal: the high level can never choose it, so the agent reaches it only by chance."""
+    missing = [g for g in _task_goals(task_ref) if g not in subgoals] if subgoals else []
     if missing:
         print(f"hubsgo: warning: model spec {spec_name!r} leaves out {', '.join(missing)} (the task's goal): the high "
               "level can never choose it, so the agent reaches it only by chance; add it to subgoals and link the "
@@ -174,8 +174,7 @@ def _unlinked_goals(resolved: dict[str, Any]) -> list[str]:
     if outcome.mismatch_nats > -float(prior.get("field", 0.0)):
         return []
     linked = {end for u, v, sign in spec.get("edges", []) if sign == "positive" for end in (u, v)}
-    goals = [d.name for d in get_task(resolved["task_ref"]).catalogue.subgoals if d.kind == "goal"]
-    return [g for g in goals if g in spec["subgoals"] and g not in linked]
+    return [g for g in _task_goals(resolved["task_ref"]) if g in spec["subgoals"] and g not in linked]
 
 
 def _build(resolved: dict[str, Any]):
@@ -343,7 +342,7 @@ def _start(cfg: RunConfig, out: Path, resume: bool):
         left = [n for n in get_task(resolved["task_ref"]).catalogue.names if n not in resolved["subgoals"]]
         print(f"hubsgo: model spec {resolved['model']!r} lists {len(resolved['subgoals'])} of the sub-goals of task "
               f"{resolved['task']!r}; not candidates in this run: {', '.join(left)}", file=sys.stderr)
-        warn_goals_left_out(resolved["model"], goals_left_out(resolved["task_ref"], resolved["subgoals"]))
+        warn_goals_left_out(resolved["model"], resolved["task_ref"], resolved["subgoals"])
     try:
         env, agent = _build(resolved)
     except BaseException as exc:
