@@ -147,6 +147,39 @@ def test_a_user_maze_without_a_spec_asks_for_one_and_trains_with_one(capsys, tmp
     assert json.loads((out / "subgoals.json").read_text())["names"] == ["key", "door", "goal"]
 
 
+def test_a_run_on_a_user_maze_given_by_a_relative_path_works_from_another_folder(capsys, tmp_path, monkeypatch):
+    """The run's config names the catalogue by its absolute path: evaluate, review and resume from elsewhere."""
+    mazes, elsewhere = tmp_path / "mazes", tmp_path / "elsewhere"
+    mazes.mkdir()
+    elsewhere.mkdir()
+    (mazes / "hall.txt").write_text("#######\n#A..#.#\n#.k.D.#\n#...#G#\n#######\n")
+    (mazes / "hall.yaml").write_text(yaml.safe_dump({
+        "task": "hall", "family": "minigrid",
+        "options": {"layout": "hall.txt", "legend": {"k": {"type": "key", "color": "red"},
+                                                     "D": {"type": "door", "color": "red", "locked": True}}},
+        "subgoals": [{"name": "key", "kind": "carrying", "args": {"type": "key", "color": "red"}},
+                     {"name": "door", "kind": "door_open", "args": {"color": "red"}},
+                     {"name": "goal", "kind": "goal"}]}))
+    (mazes / "hall-spec.yaml").write_text(yaml.safe_dump({
+        "name": "hall-spec", "subgoals": ["key", "door", "goal"],
+        "edges": [["key", "door", "positive"], ["door", "goal", "positive"]]}))
+    run = tmp_path / "run"
+    monkeypatch.chdir(mazes)
+    assert main(["train", "hall.yaml", "--model", "hall-spec.yaml", "--out", str(run), "--steps", "400",
+                 "--stop-at", "200", "--no-progress", *TINY]) == 0
+    assert yaml.safe_load((run / "config.yaml").read_text())["task_ref"] == str(mazes / "hall.yaml")
+    monkeypatch.chdir(elsewhere)
+    capsys.readouterr()
+    assert main(["train", "hall", "--out", str(run), "--resume", "--no-progress"]) == 0
+    assert main(["evaluate", str(run), "--episodes", "1"]) == 0
+    assert "hubsgo on hall: greedy return" in capsys.readouterr().out
+    assert main(["review", str(run), "--no-gif"]) == 0
+    assert main(["train", "hall.yaml", "--out", str(tmp_path / "other"), "--no-progress"]) == 2
+    assert _one_error_line(capsys) == (f"hubsgo: error: hall.yaml: no such task catalogue file (relative to "
+                                       f"{elsewhere}); check the path, or pass a built-in task name (`hubsgo tasks` "
+                                       "lists them)")
+
+
 def test_a_user_maze_whose_goal_cannot_be_reached_is_refused_before_a_run_starts(capsys, tmp_path):
     (tmp_path / "shut.txt").write_text("#######\n#A.#..#\n#.k#.G#\n#######\n")
     (tmp_path / "shut.yaml").write_text(yaml.safe_dump({

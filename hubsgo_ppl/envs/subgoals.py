@@ -71,6 +71,10 @@ class Catalogue(StrictModel):
 
 def load_catalogue(path: str | Path) -> Catalogue:
     """Load and validate a task catalogue YAML; errors name the file and key."""
+    if not Path(path).is_file():
+        where = "" if Path(path).is_absolute() else f" (relative to {Path.cwd()})"
+        raise SpecError(f"{path}: no such task catalogue file{where}; check the path, or pass a built-in task "
+                        "name (`hubsgo tasks` lists them)")
     data = load_yaml(path)
     cat = validate_spec(Catalogue, data, source=str(path))
     cat.source = str(path)

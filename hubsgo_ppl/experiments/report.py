@@ -88,8 +88,10 @@ def _layout(sweep_dir: Path) -> tuple[list[str], list[str], dict[str, str], str 
     """(tasks, variants, labels, table) from ``sweep.yaml`` if present, else from the folder tree."""
     meta = sweep_dir / "sweep.yaml"
     if meta.is_file():
+        from .sweep import column_folder
+
         spec = yaml.safe_load(meta.read_text())
-        tasks = [t["name"] for t in spec["tasks"]]
+        tasks = [column_folder(t["name"]) for t in spec["tasks"]]
         variants = [v["name"] for v in spec["variants"]]
         labels = {v["name"]: v.get("label") or v["name"] for v in spec["variants"]}
         return tasks, variants, labels, spec.get("table")
@@ -241,10 +243,10 @@ def write_report(sweep_dir: str | Path, out: str | Path | None = None, bins: int
         raise FileNotFoundError(f"{sweep_dir}: no such sweep directory; pass the --out folder of `hubsgo sweep`")
     runs = collect(sweep_dir)
     if sweep is not None:
-        from .sweep import load_sweep
+        from .sweep import column_folder, load_sweep
 
         spec, _ = load_sweep(sweep)
-        tasks, variants = [t.name for t in spec.tasks], [v.name for v in spec.variants]
+        tasks, variants = [column_folder(t.name) for t in spec.tasks], [v.name for v in spec.variants]
         labels = {v.name: v.label or v.name for v in spec.variants}
         table = spec.table
         runs = [r for r in runs if r.task in tasks and r.variant in variants and r.seed in spec.seeds]

@@ -102,6 +102,13 @@ def _critic_from_config(resolved: dict[str, Any]) -> Any:
     return SubgoalCritic.from_spec(spec, seed=stream_seed(resolved["seed"], CRITIC_STREAM))
 
 
+def task_ref(task: str | Path) -> str:
+    """How a run's config names its task: a built-in name as given, a user's catalogue by its absolute
+    path, so that the run can be evaluated, reviewed, revised and resumed from any folder."""
+    p = Path(task)
+    return str(p.resolve()) if p.suffix in (".yaml", ".yml") else str(task)
+
+
 def resolve(cfg: RunConfig) -> dict[str, Any]:
     """Everything a run needs, as plain data (written to config.yaml and into checkpoints)."""
     info = get_task(cfg.task)
@@ -117,7 +124,7 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
             raise
         raise RunError(str(exc)) from None
     resolved: dict[str, Any] = {
-        "task": info.name, "task_ref": str(cfg.task), "family": info.family,
+        "task": info.name, "task_ref": task_ref(cfg.task), "family": info.family,
         "agent": cfg.agent, "seed": int(cfg.seed), "hyper": hyper,
         "checkpoint_steps": int(cfg.checkpoint_steps), "history_every": cfg.history_every, "threads": cfg.threads,
         "versions": {"hubsgo_ppl": __version__, "torch": str(torch.__version__), "python": platform.python_version()},

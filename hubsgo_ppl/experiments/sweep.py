@@ -15,6 +15,10 @@ A sweep file (``sweeps/*.yaml``) is validated into :class:`SweepSpec`::
       - {name: hdqn-incorrect, agent: hdqn, task: "{task}_incorrect"}     # Table 2: another env, same column
       - {name: td3, agent: td3, tasks: [stack_cubes]}                       # only some columns
 
+A column may be a user's catalogue (``{name: mazes/lab.yaml, steps: 40000}``); a relative path there, or in
+a variant's ``task`` or ``model``, is read from the sweep file's folder when the file is there, else from
+the working directory, and the column's folder is the file's stem (``lab``).
+
 Run ``(task, variant, seed)`` writes ``SWEEP_DIR/<task>/<variant>/seed<seed>`` through
 :func:`hubsgo_ppl.experiments.run.train`, each in its own worker process (spawned, one torch thread).
 Re-running a sweep skips finished runs (checkpoint ``env_steps`` ≥ budget), resumes interrupted ones
@@ -42,7 +46,7 @@ from .io import CheckpointError, load_checkpoint, write_yaml
 from .run import CHECKPOINT, CHECKPOINT_STEPS, RunConfig, RunError
 
 __all__ = ["SweepSpec", "TaskEntry", "Variant", "Job", "load_sweep", "plan", "select", "run_sweep", "run_status",
-           "KILL_ENV"]
+           "column_folder", "anchored", "KILL_ENV"]
 
 #: test-only: a worker whose run id ("task/variant/seedK") equals this variable SIGKILLs itself right
 #: after its first checkpoint in that process (a deliberately crashed worker for the resume tests)
@@ -51,8 +55,24 @@ KILL_ENV = "HUBSGO_SWEEP_TEST_KILL_AFTER_CHECKPOINT"
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 
 
+def column_folder(name: str) -> str:
+    """The folder of a sweep column: a built-in task's name, or a catalogue's file stem (``mazes/lab.yaml``
+    -> ``lab``)."""
+    p = Path(name)
+    return p.stem if p.suffix in (".yaml", ".yml") else name
+
+
+def anchored(ref: str, base: Path) -> str:
+    """A relative catalogue or spec path of a sweep file, as found from the sweep file's folder ``base``
+    (absolute), or unchanged when it is not there (then it is read from the working directory)."""
+    p = Path(ref)
+    if p.suffix in (".yaml", ".yml") and not p.is_absolute() and (base / p).is_file():
+        return str((base / p).resolve())
+    return ref
+
+
 class TaskEntry(StrictModel):
-    name: str = Field(description="a built-in task name (a column of the table)")
+    name: str = Field(description="a built-in task name or a catalogue .yaml path (a column of the table)")
     steps: int = Field(gt=0, description="env-step budget of every run on this task")
     overrides: list[str] = Field(default_factory=list, description="`--set` overrides for this task's runs")
 
@@ -119,6 +139,11 @@ class SweepSpec(StrictModel):
             dup = sorted({n for n in names if names.count(n) > 1})
             if dup:
                 raise ValueError(f"{what}: duplicate name(s) {dup}; give every entry its own name")
+        folders = [column_folder(t.name) for t in self.tasks]
+        dup = sorted({f for f in folders if folders.count(f) > 1})
+        if dup:
+            raise ValueError(f"tasks: columns {dup} would share a folder (a catalogue's folder is its file's stem); "
+                             "rename one of the catalogue files")
         columns = {t.name for t in self.tasks}
         for v in self.variants:
             bad = sorted(set(v.tasks or []) - columns)
@@ -149,24 +174,29 @@ def load_sweep(sweep: str | Path) -> tuple[SweepSpec, Path]:
     spec = validate_spec(SweepSpec, load_yaml(path), source=str(path))
     from ..envs import get_task
 
+    base = path.parent
     for i, t in enumerate(spec.tasks):
         try:
-            get_task(t.name)
+            get_task(anchored(t.name, base))
         except SpecError as exc:
             raise SpecError(f"{path}: tasks[{i}].name: {exc}") from None
     for j, v in enumerate(spec.variants):
         for t in spec.tasks:
             if v.tasks is None or t.name in v.tasks:
                 try:
-                    get_task(v.task.format(task=t.name))
+                    get_task(anchored(v.task.format(task=t.name), base))
                 except (SpecError, KeyError) as exc:
                     raise SpecError(f"{path}: variants[{j}].task: {v.task!r} for column {t.name!r}: {exc}; "
                                     "use a task name, optionally with {task}") from None
     return spec, path
 
 
-def plan(spec: SweepSpec, sweep_dir: Path) -> list[Job]:
-    """Every run of the grid, in table order (tasks, then variants, then seeds)."""
+def plan(spec: SweepSpec, sweep_dir: Path, base: Path | None = None) -> list[Job]:
+    """Every run of the grid, in table order (tasks, then variants, then seeds). ``base``: the sweep
+    file's folder, from which its relative catalogue and spec paths are read (:func:`anchored`)."""
+    def ref(name: str) -> str:
+        return anchored(name, base) if base is not None else name
+
     jobs = []
     for t in spec.tasks:
         for v in spec.variants:
@@ -174,13 +204,13 @@ def plan(spec: SweepSpec, sweep_dir: Path) -> list[Job]:
                 continue
             for seed in spec.seeds:
                 budget = v.steps or t.steps
-                cfg = RunConfig(task=v.task.format(task=t.name), agent=v.agent,
-                                model=v.model.format(task=t.name) if v.model else None, graph=v.graph,
+                cfg = RunConfig(task=ref(v.task.format(task=t.name)), agent=v.agent,
+                                model=ref(v.model.format(task=t.name)) if v.model else None, graph=v.graph,
                                 steps=budget, seed=seed, low_level=v.low_level,
                                 checkpoint_steps=spec.checkpoint_steps,
                                 overrides=[*spec.overrides, *t.overrides, *v.overrides])
-                run_id = f"{t.name}/{v.name}/seed{seed}"
-                jobs.append(Job(run_id, str(sweep_dir / t.name / v.name / f"seed{seed}"), budget, asdict(cfg)))
+                run_id = f"{column_folder(t.name)}/{v.name}/seed{seed}"
+                jobs.append(Job(run_id, str(sweep_dir / run_id), budget, asdict(cfg)))
     return jobs
 
 
@@ -330,7 +360,7 @@ def run_sweep(sweep: str | Path, backend: str = "local", workers: int = 2, out: 
     sweep_dir = Path(out) if out is not None else Path("runs") / "sweeps" / spec.name
     sweep_dir.mkdir(parents=True, exist_ok=True)
     write_yaml(sweep_dir / "sweep.yaml", {**spec.model_dump(mode="json"), "source": str(path)})
-    jobs = plan(part, sweep_dir)
+    jobs = plan(part, sweep_dir, base=path.parent)
     status = {j.run_id: run_status(j) for j in jobs}
     todo = [j for j in jobs if status[j.run_id] != "finished"]
     result: dict[str, Any] = {"sweep_dir": str(sweep_dir), "finished": 0,

@@ -1,6 +1,7 @@
 """Sweeps: validation, the shipped grids, resume after a killed worker, and the Ray backend."""
 
 import importlib.util
+import shutil
 from pathlib import Path
 
 import pytest
@@ -105,6 +106,43 @@ def test_sweep_resumes_after_a_killed_worker(tmp_path, monkeypatch):
         assert (out / run_id / "checkpoint.pt").is_file() and (out / run_id / "learning_curve.png").is_file()
     third = run_sweep(path, workers=1, out=out, progress=False)
     assert (third["finished"], third["skipped"]) == (0, 7)
+
+
+def test_a_sweep_reads_its_user_maze_and_spec_from_its_own_folder(tmp_path, monkeypatch):
+    """Relative catalogue and spec paths in a sweep file are found beside it, from any working directory; the
+    column's folder is the catalogue's stem, and the report finds it there."""
+    from hubsgo_ppl.experiments.report import write_report
+    from hubsgo_ppl.resources import envs_dir
+
+    study, elsewhere = tmp_path / "study", tmp_path / "elsewhere"
+    (study / "mazes").mkdir(parents=True)
+    elsewhere.mkdir()
+    for name in ("fourroom.yaml", "fourroom.txt"):
+        shutil.copy(envs_dir() / name, study / "mazes" / name.replace("fourroom", "rooms"))
+    cat = yaml.safe_load((study / "mazes" / "rooms.yaml").read_text())
+    cat.update(task="rooms", options={**cat["options"], "layout": "rooms.txt"})
+    (study / "mazes" / "rooms.yaml").write_text(yaml.safe_dump(cat))
+    names = [g["name"] for g in cat["subgoals"]]
+    (study / "rooms-spec.yaml").write_text(yaml.safe_dump({"name": "rooms-spec", "subgoals": names, "edges": []}))
+    path = _write(study, tasks=[{"name": "mazes/rooms.yaml", "steps": 1}],
+                  variants=[{"name": "hubsgo", "agent": "hubsgo", "model": "rooms-spec.yaml"},
+                            {"name": "hdqn", "agent": "hdqn", "tasks": ["mazes/rooms.yaml"]}])
+    monkeypatch.chdir(elsewhere)
+    jobs = {j.run_id: j for j in plan(load_sweep(path)[0], tmp_path / "out", base=path.parent)}
+    assert sorted(jobs) == ["rooms/hdqn/seed0", "rooms/hubsgo/seed0"]
+    assert jobs["rooms/hubsgo/seed0"].config["task"] == str(study / "mazes" / "rooms.yaml")
+    assert jobs["rooms/hubsgo/seed0"].config["model"] == str(study / "rooms-spec.yaml")
+    result = run_sweep(path, workers=2, out=tmp_path / "out", progress=False)
+    assert (result["finished"], result["failed"]) == (2, [])
+    assert read_csv_rows(tmp_path / "out" / "rooms" / "hubsgo" / "seed0" / "metrics.csv")
+    paths = write_report(tmp_path / "out")
+    table = paths["table"].read_text()
+    assert "curve_rooms" in paths and "| Algorithm | rooms |" in table and "| hubsgo | " in table
+    (study / "mazes" / "other").mkdir()
+    shutil.copy(study / "mazes" / "rooms.yaml", study / "mazes" / "other" / "rooms.yaml")
+    clash = _write(study, tasks=[{"name": "mazes/rooms.yaml", "steps": 1}, {"name": "mazes/other/rooms.yaml", "steps": 1}])
+    with pytest.raises(SpecError, match="would share a folder"):
+        load_sweep(clash)
 
 
 @pytest.mark.skipif(importlib.util.find_spec("ray") is None, reason="the ray extra is not installed")
