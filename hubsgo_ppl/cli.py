@@ -88,6 +88,10 @@ def _print_summary(summary: dict[str, Any], out: Path) -> None:
     state = "" if summary["finished"] else "  (paused before its budget; continue with --resume)"
     print(f"run: {summary['run_dir']}  episodes={summary['episodes']}  env_steps={summary['env_steps']}  "
           f"wall={summary['wall_time']:.0f}s{state}")
+    if summary.get("settled"):
+        st = summary["settled"]
+        print(f"settled at env step {st['step']:,}: {st['rate']:.0%} of the last {st['window']} training episodes "
+              "succeeded, and since then the critic has read the successes at its settled power")
     table_path = out / "subgoals.json"
     if table_path.exists() and summary["finished"]:
         print(_fmt_ranking(json.loads(table_path.read_text())))

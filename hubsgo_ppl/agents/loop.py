@@ -140,6 +140,11 @@ class LoopConfig:
     # env's subgoal_possible() says can no longer hold in this episode (another key, where nothing can
     # be dropped, and the door it would open); envs without it offer every sub-goal not yet achieved
     exclude_impossible: bool = False
+    # The agent settles the first time its success rate over the last outcome_window training episodes
+    # reaches settle_at (0.9: the "steps to 90% success" of docs/results.md); from then on the critic's
+    # outcome evidence counts at the likelihood's settled power (infer/likelihoods.py, "outcome"), so
+    # G* follows what the reliable successes achieve. Nothing changes before it; None: never settles
+    settle_at: float | None = 0.9
 
     def __post_init__(self):
         if self.filter_refresh not in ("option", "episode"):
@@ -165,6 +170,8 @@ class LoopConfig:
             raise ValueError(f"loop.critic_every must be a positive integer, got {self.critic_every!r}")
         if int(self.outcome_window) < 1:
             raise ValueError(f"loop.outcome_window must be a positive integer, got {self.outcome_window!r}")
+        if self.settle_at is not None and not 0.0 < float(self.settle_at) <= 1.0:
+            raise ValueError(f"loop.settle_at must be in (0, 1], or null (never settles), got {self.settle_at!r}")
         if int(self.initiation_tries) < 0:
             raise ValueError(f"loop.initiation_tries must be 0 (off) or a positive integer, got {self.initiation_tries!r}")
 
@@ -190,6 +197,7 @@ class HRLLoop:
         self.success_rate = np.zeros(len(self.names))   # per-goal moving average of option success
         self._recent: deque[bool] = deque(maxlen=config.outcome_window)  # success of recent training episodes
         self._pending: list = []                # high-level minibatches waiting for the next critic update
+        self.settled_step: int | None = None    # env step at which the agent settled (settle_at)
         self.initiation = (InitiationSets(self.names, config.initiation_tries)
                            if int(config.initiation_tries) > 0 else None)
         # the weights need a critic to read and a low level that takes them (GoalDQN); without either
@@ -340,12 +348,16 @@ class HRLLoop:
                     self._pending.append(batch)
                     if len(self._pending) >= cfg.critic_every:
                         pooled, self._pending = TDBatch.cat(self._pending, cfg.critic_pool_weight), []
+                        pooled.settled = self.settled_step is not None
                         learned = self.filter.update(pooled)    # {} where the critic had no evidence
                         tally.record(learned)
                         self._weigh_low_level(bool(learned))
         if train:
             self.filter.end_episode(visited, tally.success)
             self._recent.append(bool(tally.success))
+            if (self.settled_step is None and cfg.settle_at is not None
+                    and sum(self._recent) >= cfg.settle_at * cfg.outcome_window):
+                self.settled_step = self.env_steps
             self.episodes += 1
             if self._break_cycles:
                 tally.put("low/revisits", float(revisits))
@@ -384,7 +396,7 @@ class HRLLoop:
              "rng": self.rng.bit_generator.state, "high": self.high.state_dict(),
              "high_rng": self.high.rng.bit_generator.state, "filter": self.filter.state_dict(),
              "success_rate": self.success_rate.copy(), "first_reward_step": self.first_reward_step,
-             "recent_success": list(self._recent),
+             "recent_success": list(self._recent), "settled_step": self.settled_step,
              # minibatches waiting for the next pooled critic update (the pool spans episodes)
              "pending": [{f.name: getattr(b, f.name) for f in fields(b)} for b in self._pending]}
         if self.initiation is not None:
@@ -403,6 +415,7 @@ class HRLLoop:
         self.first_reward_step = s.get("first_reward_step")
         self._recent.clear()
         self._recent.extend(bool(x) for x in s.get("recent_success", []))
+        self.settled_step = s.get("settled_step")
         self._pending = [TDBatch(**b) for b in s.get("pending", [])]
         if "success_rate" in s:
             self.success_rate = np.asarray(s["success_rate"], dtype=float).copy()

@@ -448,6 +448,9 @@ def train(cfg: RunConfig, out: str | Path, resume: bool = False, progress: bool 
                                    "wall_time": round(wall, 2), "finished": agent.env_steps >= total}
         if resolved.get("init_from"):
             summary["init_from"] = resolved["init_from"]
+        if has_critic and agent.settled_step is not None and agent.filter.critic.likelihood.settled_scale() != 1.0:
+            summary["settled"] = {"step": agent.settled_step, "rate": agent.cfg.settle_at,
+                                  "window": agent.cfg.outcome_window}
         if has_critic and agent.env_steps >= total:
             write_json(out / "subgoals.json", subgoal_table(agent.filter.critic, names))
     return summary

@@ -223,7 +223,8 @@ class SubgoalCritic(CriticReadout):
 
     def _evidence(self, data) -> tuple[tuple[torch.Tensor, ...], float, Callable | None]:
         """``(evidence tensors, weight, residual_fn)`` of what :meth:`update` was given: a TDBatch's TD
-        tensors at its ``weight``, its outcomes (for an outcome likelihood) at weight 1, or a residual
+        tensors at its ``weight``, its outcomes (for an outcome likelihood) at weight 1 (at the
+        likelihood's ``settled_scale()`` once the batch says the agent has settled), or a residual
         callable with no tensors at weight 1. The weight is that of a pool of TD minibatches
         (:meth:`TDBatch.cat`); the outcomes are the whole window of recent successes, whatever the pool,
         so they count once: weighing them by 1/K would temper the evidence by how often the critic
@@ -235,7 +236,7 @@ class SubgoalCritic(CriticReadout):
                 if data.outcomes is None or data.outcomes.shape[0] == 0:
                     raise ValueError(f"the {self.likelihood.registered_name!r} likelihood scores outcomes, and "
                                      "this TDBatch has none; attach the achieved sets of successful episodes")
-                return (data.outcomes,), 1.0, None
+                return (data.outcomes,), self.likelihood.settled_scale() if data.settled else 1.0, None
             return data.tensors(), data.weight, None
         if self.likelihood.evidence == "outcomes":
             raise TypeError(f"the {self.likelihood.registered_name!r} likelihood scores outcomes: pass a TDBatch "

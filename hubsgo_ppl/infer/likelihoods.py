@@ -76,6 +76,11 @@ class Likelihood:
     def params(self) -> dict[str, float]:
         return {}
 
+    def settled_scale(self) -> float:
+        """The factor on this likelihood's log-likelihood once the agent has settled (its recent
+        training episodes succeed reliably; the loop says when, ``TDBatch.settled``): 1 here."""
+        return 1.0
+
 
 @register_likelihood("gaussian")
 class GaussianLikelihood(Likelihood):
@@ -128,6 +133,10 @@ class OutcomeLikelihood(Likelihood):
 
         log p(a_1..a_E | w) = power * log( 1/E sum_e prod_i flip^[a_ei != w_i] (1 - flip)^[a_ei == w_i] )
 
+    Once the agent has settled (the loop's ``settle_at``: its recent training episodes succeed
+    reliably), the power is ``max(power, settled_power)``: the successes of an agent that has learned
+    the task are cleaner evidence than its first, wandering ones.
+
     A mixture over episodes, not a product: the posterior's mode is the most frequent successful set
     (smoothed by ``flip``), so two routes seen equally often give two modes rather than their union,
     and the evidence does not harden as episodes accumulate. Each sub-goal that ``w`` sets differently
@@ -140,19 +149,28 @@ class OutcomeLikelihood(Likelihood):
     sub-goal every success needs that the spec left unlinked, and undoes a wrong positive edge, but on
     mazes with many candidate cells the first successes' cells then stay in Ĝt, and learning slows
     (docs/results.md, "How strongly the successes speak").
+
+    ``settled_power`` 0.4 makes a mismatch cost 1.56 nats: more than the +1 that one positive edge to
+    the route gives a sub-goal against the field of -2 (so a linked sub-goal that no recent success
+    achieved, such as the door of the route not taken, leaves G*), and less than the field's 2 (so a
+    sub-goal without a positive edge still cannot enter, however often the successes pass it).
     """
 
     evidence = "outcomes"
 
-    def __init__(self, flip: float = 0.02, power: float = 0.25):
+    def __init__(self, flip: float = 0.02, power: float = 0.25, settled_power: float = 0.4):
         flip = _positive("outcome", "flip", flip)
         if not flip < 0.5:
             raise ValueError(f"outcome likelihood: flip must be < 0.5, got {flip!r}; e.g. flip: 0.02")
         self.flip = flip
         self.power = _positive("outcome", "power", power)
+        self.settled_power = _positive("outcome", "settled_power", settled_power)
 
     def params(self):
-        return {"flip": self.flip, "power": self.power}
+        return {"flip": self.flip, "power": self.power, "settled_power": self.settled_power}
+
+    def settled_scale(self) -> float:
+        return max(self.power, self.settled_power) / self.power
 
     @property
     def mismatch_nats(self) -> float:

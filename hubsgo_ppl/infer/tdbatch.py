@@ -42,6 +42,9 @@ class TDBatch:
     # the achieved sets of recent successful episodes, (E, N) float 0/1: the evidence of likelihoods
     # with ``evidence = "outcomes"`` (CriticFilter attaches them; TD likelihoods ignore them)
     outcomes: torch.Tensor | None = None
+    # the agent has settled: its recent training episodes succeed reliably (the loop's settle_at); an
+    # outcome likelihood then weighs its evidence by its settled_scale()
+    settled: bool = False
 
     @classmethod
     def cat(cls, batches: "list[TDBatch]", reduce: str = "mean") -> "TDBatch":
@@ -63,6 +66,7 @@ class TDBatch:
             discount=torch.cat([b.discount for b in batches]),
             available=None if masks[0] is None else torch.cat(masks),
             outcomes=batches[-1].outcomes,
+            settled=batches[-1].settled,
             weight=sum(b.weight for b in batches) / len(batches) ** (2 if reduce == "mean" else 1),
         )
 

@@ -22,6 +22,7 @@ class FixedSetFilter:
         self.updates = 0
         self.rows = 0          # transitions seen over all updates
         self.weights = []
+        self.settled = []
 
     def allowed(self, achieved=None):
         return self.mask
@@ -30,6 +31,7 @@ class FixedSetFilter:
         self.updates += 1
         self.rows += batch.q_next.shape[0]
         self.weights.append(batch.weight)
+        self.settled.append(batch.settled)
         return {"critic/loss": 1.0}
 
     def end_episode(self, visited, success):
@@ -311,6 +313,35 @@ def test_recent_success_caps_the_exploration_it_is_asked_to_cap():
     assert list(other._recent) == list(loop._recent)
     with pytest.raises(ValueError, match="loop.explore_by_success must be one of none, high, both"):
         _loop(extra=["loop.explore_by_success=always"])
+
+
+def test_the_agent_settles_once_its_recent_success_reaches_settle_at_and_stays_settled():
+    """Critic batches say ``settled`` from the episode after the one that brought the success rate over
+    the last outcome_window episodes to settle_at; the latch survives failures and a checkpoint."""
+    loop = _loop(steps=2000, extra=["loop.outcome_window=4", "loop.settle_at=0.75", "loop.critic_every=1"])
+    loop.filter = FixedSetFilter([True] * 5)
+    while loop.high.updates == 0:                       # no success in a window of 4: never settled
+        loop._recent.clear()
+        loop.run_episode(train=True)
+    assert loop.settled_step is None and set(loop.filter.settled) == {False}
+    loop._recent.clear()
+    loop._recent.extend([True, True, True])             # 3 of 4, whatever this episode does: settled
+    loop.run_episode(train=True)
+    assert loop.settled_step == loop.env_steps and set(loop.filter.settled) == {False}
+    before = len(loop.filter.settled)
+    loop._recent.extend([False] * 4)                    # failures afterwards do not unsettle it
+    loop.run_episode(train=True)
+    assert len(loop.filter.settled) > before and set(loop.filter.settled[before:]) == {True}
+    other = _loop(steps=2000, extra=["loop.outcome_window=4", "loop.settle_at=0.75"])
+    other.filter = FixedSetFilter([True] * 5)
+    other.load_state_dict(loop.state_dict())
+    assert other.settled_step == loop.settled_step
+    never = _loop(extra=["loop.outcome_window=4", "loop.settle_at=null"])
+    never._recent.extend([True] * 4)
+    never.run_episode(train=True)
+    assert never.settled_step is None
+    with pytest.raises(ValueError, match=r"loop.settle_at must be in \(0, 1\], or null"):
+        _loop(extra=["loop.settle_at=1.5"])
 
 
 def test_the_success_rate_over_played_episodes_caps_from_the_first_success():

@@ -390,6 +390,36 @@ def test_outcomes_count_once_whatever_the_pool_of_td_minibatches(power, route_ma
     assert top == (["a1", "b1"] if power == 1.0 else [])
 
 
+def test_a_settled_agent_drops_the_door_of_the_route_its_successes_never_took():
+    """A spec of positive edges only (each key with its door, each door with the goal), ten successes
+    on route 1. Before the agent settles the evidence counts at power 0.25: a mismatch (0.97 nats) costs
+    less than the +1 that door2's edge to the goal gives it, and the exact posterior's mode holds both
+    routes. A settled batch counts at the settled power 0.4 (1.56 nats a mismatch): the mode is route 1,
+    and q reaches the exact posterior's marginals."""
+    names = ["key1", "door1", "key2", "door2", "goal"]
+    graph = SubgoalGraph(names, [("key1", "door1", 1), ("key2", "door2", 1), ("door1", "goal", 1),
+                                 ("door2", "goal", 1)])
+    route = torch.tensor([[1.0, 1.0, 0.0, 0.0, 1.0]] * 10)
+    s = state_table(5)
+    critics = []
+    for settled in (False, True):
+        batch = td_batch(5, seed=1)
+        batch.outcomes, batch.settled = route, settled
+        critic = SubgoalCritic(graph, "ising", {"strength": 3.0, "field": -2.0}, "outcome", {},
+                               config=InferenceConfig(init="prior"), seed=0)
+        for _ in range(400):
+            critic.update(batch)
+        power = 0.4 if settled else 0.25
+        log_post = critic.prior.distribution().log_prob(s) + get_likelihood(
+            "outcome", power=power).log_likelihood(s, route)
+        post = log_post.softmax(0)
+        exact = (post[:, None] * s).sum(0)
+        assert torch.allclose(critic.marginals().detach(), exact, atol=0.05), (settled, critic.marginals(), exact)
+        assert s[post.argmax()].tolist() == ([1.0, 1.0, 0.0, 0.0, 1.0] if settled else [1.0] * 5)
+        critics.append(critic)
+    assert critics[1].ranking(num_samples=4000, top_k=1)[0]["subgoals"] == ["key1", "door1", "goal"]
+
+
 def test_outcome_likelihood_refuses_batches_without_outcomes():
     critic = SubgoalCritic(KEYDOOR, likelihood="outcome", seed=0)
     with pytest.raises(ValueError, match="scores outcomes"):

@@ -65,16 +65,21 @@ def test_outcome_likelihood_is_a_mixture_over_episodes():
         return d * math.log(0.1) + (3 - d) * math.log(0.9)
     expected = [math.log(0.5 * (math.exp(per(a)) + math.exp(per(b)))) for a, b in ((0, 2), (2, 2), (1, 1))]
     assert torch.allclose(lik.log_likelihood(w, outcomes), torch.tensor(expected), atol=1e-6)
-    assert lik.evidence == "outcomes" and lik.params() == {"flip": 0.1, "power": 1.0}
+    assert lik.evidence == "outcomes" and lik.params() == {"flip": 0.1, "power": 1.0, "settled_power": 0.4}
+    assert lik.settled_scale() == 1.0          # settling never weakens the evidence: max(power, settled_power)
     # tempered: the default power 0.25 scales the whole log-likelihood, mixture included
     tempered = get_likelihood("outcome", flip=0.1)
-    assert tempered.params() == {"flip": 0.1, "power": 0.25}
+    assert tempered.params() == {"flip": 0.1, "power": 0.25, "settled_power": 0.4}
+    assert tempered.settled_scale() == pytest.approx(1.6)
+    assert get_likelihood("gaussian").settled_scale() == 1.0
     assert torch.allclose(tempered.log_likelihood(w, outcomes), 0.25 * torch.tensor(expected), atol=1e-6)
     with pytest.raises(ValueError, match="flip must be < 0.5"):
         get_likelihood("outcome", flip=0.7)
     for bad in (0, -1, float("nan"), "x"):
         with pytest.raises(ValueError, match="power must be"):
             get_likelihood("outcome", power=bad)
+        with pytest.raises(ValueError, match="settled_power must be"):
+            get_likelihood("outcome", settled_power=bad)
     with pytest.raises(ValueError, match="outcomes must have shape"):
         lik.log_likelihood(w, torch.zeros(0, 3))
 
