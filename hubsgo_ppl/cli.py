@@ -226,8 +226,10 @@ def cmd_review(args: argparse.Namespace) -> int:
                num_samples=args.samples, top_k=args.top_k, last=args.last, seed=args.seed)
     g = r["g_star"]
     tie = "  (near tie with the next)" if g.get("near_tie") else ""
+    settled = (f"settled at env step {r['settled_step']:,}" if r.get("settled_step") is not None
+               else "not settled yet")
     print(f"review of {r['run_dir']} ({r['task']}, {r['model']}) at env step {r['env_steps']:,} "
-          f"(episode {r['episodes']})")
+          f"(episode {r['episodes']}; {settled})")
     print(f"G*: {{{', '.join(g['subgoals'])}}}  P={g['prob']:.3f}{tie}")
     print("marginals P(w=1): " + ", ".join(f"{n}={p:.2f}" for n, p in r["marginals"].items()))
     t = r["trend"]

@@ -174,6 +174,9 @@ def test_a_run_on_a_user_maze_given_by_a_relative_path_works_from_another_folder
     assert main(["evaluate", str(run), "--episodes", "1"]) == 0
     assert "hubsgo on hall: greedy return" in capsys.readouterr().out
     assert main(["review", str(run), "--no-gif"]) == 0
+    assert "(episode " in capsys.readouterr().out
+    review = json.loads((run / "review" / "review.json").read_text())
+    assert review["task"] == "hall" and "settled_step" in review
     assert main(["train", "hall.yaml", "--out", str(tmp_path / "other"), "--no-progress"]) == 2
     assert _one_error_line(capsys) == (f"hubsgo: error: hall.yaml: no such task catalogue file (relative to "
                                        f"{elsewhere}); check the path, or pass a built-in task name (`hubsgo tasks` "

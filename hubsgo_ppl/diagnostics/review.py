@@ -257,6 +257,9 @@ def _review(run_dir: Path, resolved: dict[str, Any], env: Any, agent: Any, thres
         "format": REVIEW_FORMAT, "run_dir": str(run_dir), "task": resolved.get("task"),
         "agent": resolved.get("agent"), "model": resolved.get("model"), "graph": (resolved.get("model_spec") or {}).get("graph"),
         "seed": resolved.get("seed"), "env_steps": int(agent.env_steps), "episodes": int(agent.episodes),
+        # the env step at which the agent settled (loop.settle_at; None: not yet), after which the critic
+        # reads the successes at the outcome likelihood's settled power
+        "settled_step": getattr(agent, "settled_step", None),
         "threshold": float(threshold), "dead_band": float(dead_band), "num_samples": int(num_samples),
         "names": names,
         "g_star": ranking[0],
@@ -359,7 +362,9 @@ def render_markdown(r: dict[str, Any]) -> str:
     lines = [f"# Mixed-initiative review: {r['task']} ({r['agent']}, {r.get('model') or 'no spec'}, seed {r['seed']})",
              "",
              f"Run `{r['run_dir']}` at env step {r['env_steps']:,} (episode {r['episodes']}). "
-             f"Suggested drops: P(w_i = 1) < {r['threshold']:.2f}; a coupling has a sign when |J| > {r['dead_band']:.2f}.",
+             f"Suggested drops: P(w_i = 1) < {r['threshold']:.2f}; a coupling has a sign when |J| > {r['dead_band']:.2f}. "
+             + (f"The agent settled at env step {r['settled_step']:,}; since then the critic has read the successes at "
+                "its settled power." if r.get("settled_step") is not None else "The agent has not settled yet."),
              "", "## Suggested changes to the spec", ""]
     changes = []
     for c in r["flagged_edges"]:

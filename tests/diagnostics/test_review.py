@@ -61,6 +61,8 @@ def test_g_star_is_the_critics_top_set_and_files_are_written(run, tmp_path):
     marg = critic.marginals().numpy()
     assert np.allclose([r["marginals"][n] for n in critic.names], marg)
     assert r["env_steps"] == agent.env_steps >= 1500 and r["episodes"] == agent.episodes
+    assert r["settled_step"] == agent.settled_step
+    assert ("The agent has not settled yet." in (out / "review.md").read_text()) == (agent.settled_step is None)
     assert json.loads((out / "review.json").read_text()) == json.loads(json.dumps(r))
     md = (out / "review.md").read_text()
     assert "G*" in md and f"env step {agent.env_steps:,}" in md and "{" + ", ".join(r["g_star"]["subgoals"]) + "}" in md
