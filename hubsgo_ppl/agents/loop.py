@@ -140,8 +140,9 @@ class LoopConfig:
     # env's subgoal_possible() says can no longer hold in this episode (another key, where nothing can
     # be dropped, and the door it would open); envs without it offer every sub-goal not yet achieved
     exclude_impossible: bool = False
-    # The agent settles the first time its success rate over the last outcome_window training episodes
-    # reaches settle_at (0.9: the "steps to 90% success" of docs/results.md); from then on the critic's
+    # The agent settles at the end of the first episode at which its success rate over its last
+    # outcome_window training episodes (a full window) reaches settle_at (0.9: the episode of "steps to
+    # 90% success" in docs/results.md); from then on the critic's
     # outcome evidence counts at the likelihood's settled power (infer/likelihoods.py, "outcome"), so
     # G* follows what the reliable successes achieve. Nothing changes before it; None: never settles
     settle_at: float | None = 0.9
@@ -356,6 +357,7 @@ class HRLLoop:
             self.filter.end_episode(visited, tally.success)
             self._recent.append(bool(tally.success))
             if (self.settled_step is None and cfg.settle_at is not None
+                    and len(self._recent) == cfg.outcome_window
                     and sum(self._recent) >= cfg.settle_at * cfg.outcome_window):
                 self.settled_step = self.env_steps
             self.episodes += 1
