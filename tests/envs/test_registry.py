@@ -83,7 +83,7 @@ def test_user_catalogue_in_a_temp_folder(tmp_path):
 
 
 def test_missing_user_catalogue():
-    with pytest.raises(SpecError, match="no such spec file"):
+    with pytest.raises(SpecError, match="no such task catalogue file"):
         T.make("nowhere/maze.yaml")
 
 
