@@ -91,7 +91,7 @@ def _print_summary(summary: dict[str, Any], out: Path) -> None:
     if summary.get("settled"):
         st = summary["settled"]
         print(f"settled at env step {st['step']:,}: {st['rate']:.0%} of the last {st['window']} training episodes "
-              "succeeded, and since then the critic has read the successes at its settled power")
+              "succeeded; G* is read from the critic refitted on the recent successes at its settled power")
     table_path = out / "subgoals.json"
     if table_path.exists() and summary["finished"]:
         print(_fmt_ranking(json.loads(table_path.read_text())))
@@ -159,7 +159,7 @@ def cmd_subgoals(args: argparse.Namespace) -> int:
             if not (hasattr(agent, "filter") and hasattr(agent.filter, "critic")):
                 raise RunError(f"{run_dir}: agent {resolved['agent']!r} has no sub-goal critic; "
                                "train with --agent hubsgo to learn sub-goal sets")
-            table = subgoal_table(agent.filter.critic, list(env.unwrapped.subgoal_names), args.samples)
+            table = subgoal_table(agent.g_star_critic(), list(env.unwrapped.subgoal_names), args.samples)
     print(_fmt_ranking(table))
     return 0
 

@@ -142,10 +142,13 @@ class LoopConfig:
     exclude_impossible: bool = False
     # The agent settles at the end of the first episode at which its success rate over its last
     # outcome_window training episodes (a full window) reaches settle_at (0.9: the episode of "steps to
-    # 90% success" in docs/results.md); from then on the critic's
-    # outcome evidence counts at the likelihood's settled power (infer/likelihoods.py, "outcome"), so
-    # G* follows what the reliable successes achieve. Nothing changes before it; None: never settles
+    # 90% success" in docs/results.md). From then on G*, the set the run reports (subgoals.json, the
+    # review), is read from the critic refitted for settle_updates updates on the recent successes at
+    # the likelihood's settled power (infer/likelihoods.py, "outcome"; g_star_critic), so it follows
+    # what the reliable successes achieve. Training, and Ĝt, keep the critic that reads them at the
+    # learning power: runs are the same with or without settling. None: never settles
     settle_at: float | None = 0.9
+    settle_updates: int = 300
 
     def __post_init__(self):
         if self.filter_refresh not in ("option", "episode"):
@@ -173,6 +176,8 @@ class LoopConfig:
             raise ValueError(f"loop.outcome_window must be a positive integer, got {self.outcome_window!r}")
         if self.settle_at is not None and not 0.0 < float(self.settle_at) <= 1.0:
             raise ValueError(f"loop.settle_at must be in (0, 1], or null (never settles), got {self.settle_at!r}")
+        if int(self.settle_updates) < 1:
+            raise ValueError(f"loop.settle_updates must be a positive integer, got {self.settle_updates!r}")
         if int(self.initiation_tries) < 0:
             raise ValueError(f"loop.initiation_tries must be 0 (off) or a positive integer, got {self.initiation_tries!r}")
 
@@ -199,6 +204,7 @@ class HRLLoop:
         self._recent: deque[bool] = deque(maxlen=config.outcome_window)  # success of recent training episodes
         self._pending: list = []                # high-level minibatches waiting for the next critic update
         self.settled_step: int | None = None    # env step at which the agent settled (settle_at)
+        self._g_star: tuple[tuple[int, int], Any] | None = None     # (when, critic) of g_star_critic
         self.initiation = (InitiationSets(self.names, config.initiation_tries)
                            if int(config.initiation_tries) > 0 else None)
         # the weights need a critic to read and a low level that takes them (GoalDQN); without either
@@ -349,7 +355,6 @@ class HRLLoop:
                     self._pending.append(batch)
                     if len(self._pending) >= cfg.critic_every:
                         pooled, self._pending = TDBatch.cat(self._pending, cfg.critic_pool_weight), []
-                        pooled.settled = self.settled_step is not None
                         learned = self.filter.update(pooled)    # {} where the critic had no evidence
                         tally.record(learned)
                         self._weigh_low_level(bool(learned))
@@ -365,6 +370,19 @@ class HRLLoop:
                 tally.put("low/revisits", float(revisits))
         return tally.stats(self.env_steps, len(option_log), explore_eps=explore, filter_eps=filter_eps,
                            chosen=[o["goal"] for o in option_log], option_log=option_log)
+
+    def g_star_critic(self) -> Any:
+        """The critic that G* is read from: before the agent settles (or without ``settle_at``) the
+        filter's own critic; once it has settled, a copy refitted for ``settle_updates`` updates on the
+        recent successes at the likelihood's settled power (``SubgoalCritic.settled``). The filter's
+        critic, which chooses Ĝt and goes on training, is unchanged. None for an agent without a critic."""
+        critic = getattr(self.filter, "critic", None)
+        if critic is None or self.settled_step is None:
+            return critic
+        when = (self.env_steps, int(critic.num_updates))
+        if self._g_star is None or self._g_star[0] != when:
+            self._g_star = (when, critic.settled(self.filter.outcomes(), int(self.cfg.settle_updates)))
+        return self._g_star[1]
 
     def _weigh_low_level(self, learned: bool) -> None:
         """``low_goal_weight``: after a critic update from evidence (or, with "prior_marginal", at the
@@ -418,6 +436,7 @@ class HRLLoop:
         self._recent.clear()
         self._recent.extend(bool(x) for x in s.get("recent_success", []))
         self.settled_step = s.get("settled_step")
+        self._g_star = None
         self._pending = [TDBatch(**b) for b in s.get("pending", [])]
         if "success_rate" in s:
             self.success_rate = np.asarray(s["success_rate"], dtype=float).copy()

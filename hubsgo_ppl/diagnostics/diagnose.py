@@ -32,7 +32,7 @@ def diagnose(run_dir: str | Path, chains: int = 4, draws: int = 2000, burn_in: i
     if not (hasattr(agent, "filter") and hasattr(agent.filter, "critic")):
         raise RunError(f"{run_dir}: agent {resolved['agent']!r} has no sub-goal critic to diagnose; "
                        "train with --agent hubsgo")
-    critic = agent.filter.critic
+    critic = agent.g_star_critic()         # the posterior G* is read from (loop.settle_at)
     names = list(critic.names)
     out = Path(out) if out else run_dir / "diagnostics"
     out.mkdir(parents=True, exist_ok=True)

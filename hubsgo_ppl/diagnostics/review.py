@@ -240,7 +240,7 @@ def _refusal(run_dir: Path, agent: Any) -> str:
 def _review(run_dir: Path, resolved: dict[str, Any], env: Any, agent: Any, threshold: float, out: Path,
             gif: bool, dead_band: float, num_samples: int, top_k: int, last: int,
             seed: int | None) -> dict[str, Any]:
-    critic = agent.filter.critic
+    critic = agent.g_star_critic()         # once settled: refitted at the settled power (loop.settle_at)
     names = list(critic.names)
     # first, so that G* is the ranking a freshly loaded critic gives (it advances the critic's generator)
     ranking = critic.ranking(num_samples=num_samples, top_k=top_k)
@@ -257,8 +257,8 @@ def _review(run_dir: Path, resolved: dict[str, Any], env: Any, agent: Any, thres
         "format": REVIEW_FORMAT, "run_dir": str(run_dir), "task": resolved.get("task"),
         "agent": resolved.get("agent"), "model": resolved.get("model"), "graph": (resolved.get("model_spec") or {}).get("graph"),
         "seed": resolved.get("seed"), "env_steps": int(agent.env_steps), "episodes": int(agent.episodes),
-        # the env step at which the agent settled (loop.settle_at; None: not yet), after which the critic
-        # reads the successes at the outcome likelihood's settled power
+        # the env step at which the agent settled (loop.settle_at; None: not yet), after which G* and the
+        # marginals here come from the critic refitted on the recent successes at the likelihood's settled power
         "settled_step": getattr(agent, "settled_step", None),
         "threshold": float(threshold), "dead_band": float(dead_band), "num_samples": int(num_samples),
         "names": names,
@@ -363,8 +363,8 @@ def render_markdown(r: dict[str, Any]) -> str:
              "",
              f"Run `{r['run_dir']}` at env step {r['env_steps']:,} (episode {r['episodes']}). "
              f"Suggested drops: P(w_i = 1) < {r['threshold']:.2f}; a coupling has a sign when |J| > {r['dead_band']:.2f}. "
-             + (f"The agent settled at env step {r['settled_step']:,}; since then the critic has read the successes at "
-                "its settled power." if r.get("settled_step") is not None else "The agent has not settled yet."),
+             + (f"The agent settled at env step {r['settled_step']:,}; G* and the marginals below come from the critic "
+                "refitted on its recent successes at the likelihood's settled power." if r.get("settled_step") is not None else "The agent has not settled yet."),
              "", "## Suggested changes to the spec", ""]
     changes = []
     for c in r["flagged_edges"]:

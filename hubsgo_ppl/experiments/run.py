@@ -452,7 +452,7 @@ def train(cfg: RunConfig, out: str | Path, resume: bool = False, progress: bool 
             summary["settled"] = {"step": agent.settled_step, "rate": agent.cfg.settle_at,
                                   "window": agent.cfg.outcome_window}
         if has_critic and agent.env_steps >= total:
-            write_json(out / "subgoals.json", subgoal_table(agent.filter.critic, names))
+            write_json(out / "subgoals.json", subgoal_table(agent.g_star_critic(), names))
     return summary
 
 

@@ -224,7 +224,7 @@ class SubgoalCritic(CriticReadout):
     def _evidence(self, data) -> tuple[tuple[torch.Tensor, ...], float, Callable | None]:
         """``(evidence tensors, weight, residual_fn)`` of what :meth:`update` was given: a TDBatch's TD
         tensors at its ``weight``, its outcomes (for an outcome likelihood) at weight 1 (at the
-        likelihood's ``settled_scale()`` once the batch says the agent has settled), or a residual
+        likelihood's ``settled_scale()`` where the batch says ``settled``: :meth:`settled`), or a residual
         callable with no tensors at weight 1. The weight is that of a pool of TD minibatches
         (:meth:`TDBatch.cat`); the outcomes are the whole window of recent successes, whatever the pool,
         so they count once: weighing them by 1/K would temper the evidence by how often the critic
@@ -323,6 +323,23 @@ class SubgoalCritic(CriticReadout):
                 "unique_configs": float(configs.shape[0]),
                 "theta_abs_max": theta_abs_max,
             }
+
+    def settled(self, outcomes: torch.Tensor, steps: int) -> "SubgoalCritic":
+        """A copy of this critic after ``steps`` updates on ``outcomes`` (E, N) read at the likelihood's
+        settled power (:meth:`~hubsgo_ppl.infer.likelihoods.Likelihood.settled_scale`): the posterior
+        that the successes of a settled agent give. This critic, its chains and its RNG are unchanged.
+        A likelihood without a settled power (scale 1), or no outcomes, gives this critic itself."""
+        if self.likelihood.settled_scale() == 1.0 or outcomes is None or outcomes.shape[0] == 0:
+            return self
+        twin = SubgoalCritic(self.graph, prior=self.prior.registered_name, prior_params=self.prior.params(),
+                             likelihood=self.likelihood.registered_name, likelihood_params=self.likelihood.params(),
+                             config=self.config, seed=self.seed)
+        twin.load_state_dict(self.state_dict())
+        batch = TDBatch(q_taken=torch.zeros(0), q_next=torch.zeros(0, self.n), reward=torch.zeros(0),
+                        discount=torch.zeros(0), outcomes=outcomes, settled=True)
+        for _ in range(int(steps)):
+            twin.update(batch)
+        return twin
 
     # -- checkpoints -------------------------------------------------------------------------
 

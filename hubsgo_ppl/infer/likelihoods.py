@@ -77,8 +77,9 @@ class Likelihood:
         return {}
 
     def settled_scale(self) -> float:
-        """The factor on this likelihood's log-likelihood once the agent has settled (its recent
-        training episodes succeed reliably; the loop says when, ``TDBatch.settled``): 1 here."""
+        """The factor on this likelihood's log-likelihood in the critic G* is read from once the agent
+        has settled (its recent training episodes succeed reliably; the loop's ``settle_at``, a batch's
+        ``TDBatch.settled``): 1 here."""
         return 1.0
 
 
@@ -134,8 +135,9 @@ class OutcomeLikelihood(Likelihood):
         log p(a_1..a_E | w) = power * log( 1/E sum_e prod_i flip^[a_ei != w_i] (1 - flip)^[a_ei == w_i] )
 
     Once the agent has settled (the loop's ``settle_at``: its recent training episodes succeed
-    reliably), the power is ``max(power, settled_power)``: the successes of an agent that has learned
-    the task are cleaner evidence than its first, wandering ones.
+    reliably), G* is read from a copy of the critic refitted at the power ``max(power, settled_power)``
+    (``SubgoalCritic.settled``): the successes of an agent that has learned the task are cleaner
+    evidence than its first, wandering ones. The critic that chooses Ĝt keeps reading them at ``power``.
 
     A mixture over episodes, not a product: the posterior's mode is the most frequent successful set
     (smoothed by ``flip``), so two routes seen equally often give two modes rather than their union,

@@ -15,7 +15,7 @@ import torch
 __all__ = ["TDBatch", "td_residuals"]
 
 
-_NOT_TD = ("available", "weight", "outcomes")
+_NOT_TD = ("available", "weight", "outcomes", "settled")
 
 
 @dataclass
@@ -42,8 +42,8 @@ class TDBatch:
     # the achieved sets of recent successful episodes, (E, N) float 0/1: the evidence of likelihoods
     # with ``evidence = "outcomes"`` (CriticFilter attaches them; TD likelihoods ignore them)
     outcomes: torch.Tensor | None = None
-    # the agent has settled: its recent training episodes succeed reliably (the loop's settle_at); an
-    # outcome likelihood then weighs its evidence by its settled_scale()
+    # read the outcomes as those of a settled agent (SubgoalCritic.settled, the critic G* is read from once
+    # the loop's settle_at is reached): an outcome likelihood then weighs its evidence by its settled_scale()
     settled: bool = False
 
     @classmethod
@@ -78,6 +78,7 @@ class TDBatch:
             self.available = torch.as_tensor(self.available).detach().bool()
         if self.outcomes is not None:
             self.outcomes = torch.as_tensor(self.outcomes).detach().to(torch.float32)
+        self.settled = bool(self.settled)
         for f in fields(self):
             if f.name in _NOT_TD:
                 continue

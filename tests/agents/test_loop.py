@@ -316,8 +316,9 @@ def test_recent_success_caps_the_exploration_it_is_asked_to_cap():
 
 
 def test_the_agent_settles_once_its_recent_success_reaches_settle_at_and_stays_settled():
-    """Critic batches say ``settled`` from the episode after the one that brought the success rate over
-    the last outcome_window episodes to settle_at; the latch survives failures and a checkpoint."""
+    """The agent settles at the end of the episode that brings the success rate over the last
+    outcome_window episodes to settle_at; the latch survives failures and a checkpoint. Training never
+    reads the successes as settled: every critic batch, before and after, is an ordinary one."""
     loop = _loop(steps=2000, extra=["loop.outcome_window=4", "loop.settle_at=0.75", "loop.critic_every=1"])
     loop.filter = FixedSetFilter([True] * 5)
     while loop.high.updates == 0:                       # no success in a window of 4: never settled
@@ -327,11 +328,12 @@ def test_the_agent_settles_once_its_recent_success_reaches_settle_at_and_stays_s
     loop._recent.clear()
     loop._recent.extend([True, True, True])             # 3 of 4, whatever this episode does: settled
     loop.run_episode(train=True)
-    assert loop.settled_step == loop.env_steps and set(loop.filter.settled) == {False}
+    assert loop.settled_step == loop.env_steps
     before = len(loop.filter.settled)
     loop._recent.extend([False] * 4)                    # failures afterwards do not unsettle it
     loop.run_episode(train=True)
-    assert len(loop.filter.settled) > before and set(loop.filter.settled[before:]) == {True}
+    assert loop.settled_step is not None and len(loop.filter.settled) > before
+    assert set(loop.filter.settled) == {False}
     other = _loop(steps=2000, extra=["loop.outcome_window=4", "loop.settle_at=0.75"])
     other.filter = FixedSetFilter([True] * 5)
     other.load_state_dict(loop.state_dict())
@@ -342,6 +344,41 @@ def test_the_agent_settles_once_its_recent_success_reaches_settle_at_and_stays_s
     assert never.settled_step is None
     with pytest.raises(ValueError, match=r"loop.settle_at must be in \(0, 1\], or null"):
         _loop(extra=["loop.settle_at=1.5"])
+    with pytest.raises(ValueError, match="loop.settle_updates must be a positive integer"):
+        _loop(extra=["loop.settle_updates=0"])
+
+
+def test_g_star_is_read_from_the_critic_refitted_at_the_settled_power_once_the_agent_settles():
+    """Before the agent settles G* comes from the filter's critic; once it has settled, from a copy
+    refitted for settle_updates updates on the window of recent successes at the settled power, the
+    same copy until the critic or the step moves on; the filter's critic is untouched."""
+    from hubsgo_ppl.graph import SubgoalGraph
+    from hubsgo_ppl.infer.config import InferenceConfig
+    from hubsgo_ppl.infer.critic import SubgoalCritic
+
+    register()
+    names = ["yellow_key", "yellow_door", "blue_key", "blue_door", "goal"]
+    graph = SubgoalGraph(names, [("yellow_key", "yellow_door", 1), ("blue_key", "blue_door", 1),
+                                 ("yellow_door", "goal", 1), ("blue_door", "goal", 1)])
+    critic = SubgoalCritic(graph, "ising", {"strength": 3.0, "field": -2.0}, "outcome", {},
+                           config=InferenceConfig(init="prior"), seed=0)
+    cfg = apply_overrides(preset("minigrid"), SMALL + ["loop.settle_updates=50"])
+    loop = build_agent("hubsgo", make("keydoor", max_steps=60), cfg, seed=5, critic=critic)
+    assert loop.g_star_critic() is critic
+    route = np.array([1, 1, 0, 0, 1], dtype=bool)       # a key, its door and the goal
+    for _ in range(10):
+        loop.filter.end_episode(route, True)
+    loop.settled_step = loop.env_steps
+    before = {k: v.clone() for k, v in critic.state_dict().items() if isinstance(v, torch.Tensor)}
+    read = loop.g_star_critic()
+    assert read is not critic and loop.g_star_critic() is read
+    want = critic.settled(loop.filter.outcomes(), 50)
+    torch.testing.assert_close(read.state_dict()["theta"], want.state_dict()["theta"])
+    assert not torch.equal(read.state_dict()["theta"], critic.state_dict()["theta"])
+    after = critic.state_dict()
+    assert all(torch.equal(v, after[k]) for k, v in before.items())
+    loop.env_steps += 1                                 # the run moved on: read afresh
+    assert loop.g_star_critic() is not read
 
 
 def test_the_success_rate_over_played_episodes_caps_from_the_first_success():

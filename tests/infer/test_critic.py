@@ -426,3 +426,38 @@ def test_outcome_likelihood_refuses_batches_without_outcomes():
         critic.update(td_batch(4, seed=0))
     with pytest.raises(TypeError, match="scores outcomes"):
         critic.update(keydoor_residuals)
+
+
+def test_the_settled_copy_reaches_the_settled_posterior_and_leaves_the_critic_as_it_was():
+    """``critic.settled(outcomes, steps)`` refits a copy at the settled power 0.4: from a critic that
+    learned at power 0.25 (both routes in the mode), the copy's marginals are the exact settled
+    posterior's within 0.05 and its G* is route 1; the critic's own state is unchanged, and a
+    likelihood without a settled power gives the critic itself."""
+    names = ["key1", "door1", "key2", "door2", "goal"]
+    graph = SubgoalGraph(names, [("key1", "door1", 1), ("key2", "door2", 1), ("door1", "goal", 1),
+                                 ("door2", "goal", 1)])
+    route = torch.tensor([[1.0, 1.0, 0.0, 0.0, 1.0]] * 10)
+    batch = td_batch(5, seed=1)
+    batch.outcomes = route
+    critic = SubgoalCritic(graph, "ising", {"strength": 3.0, "field": -2.0}, "outcome", {},
+                           config=InferenceConfig(init="prior"), seed=0)
+    for _ in range(400):
+        critic.update(batch)
+    before = critic.state_dict()
+    copy = critic.settled(route, 300)
+    after = critic.state_dict()
+    for key in ("theta", "coupling", "chains", "rng"):
+        assert torch.equal(before[key], after[key]), key
+    assert after["num_updates"] == before["num_updates"] == 400
+    s = state_table(5)
+    exact = {}
+    for power in (0.25, 0.4):
+        log_post = critic.prior.distribution().log_prob(s) + get_likelihood(
+            "outcome", power=power).log_likelihood(s, route)
+        exact[power] = (log_post.softmax(0)[:, None] * s).sum(0)
+    assert torch.allclose(critic.marginals().detach(), exact[0.25], atol=0.05), (critic.marginals(), exact[0.25])
+    assert torch.allclose(copy.marginals().detach(), exact[0.4], atol=0.05), (copy.marginals(), exact[0.4])
+    assert exact[0.25][3] - exact[0.4][3] > 0.1            # door2 loses what the settled power takes from it
+    assert copy.ranking(num_samples=4000, top_k=1)[0]["subgoals"] == ["key1", "door1", "goal"]
+    td = SubgoalCritic(graph, "ising", {"strength": 3.0, "field": -2.0}, "gaussian", {}, seed=0)
+    assert td.settled(route, 10) is td
