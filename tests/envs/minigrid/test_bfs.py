@@ -4,6 +4,7 @@ transition model that matches MiniGrid step for step."""
 from __future__ import annotations
 
 import textwrap
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -119,6 +120,42 @@ def test_check_reachable_refuses_an_unreachable_goal_and_names_unreachable_subgo
     assert bfs.check_reachable(path) == ["red_key", "corner"]
     # past max_states nothing is checked
     assert bfs.check_reachable(_user_task(tmp_path, "######\n#A.#G#\n######\n"), max_states=1) is None
+
+
+def _states(path, actions=None):
+    """How many states a whole search from the start visits (with ``actions`` in place of the task's)."""
+    spec = load_maze_spec(path)
+    if actions is not None:
+        spec = replace(spec, options=spec.options.model_copy(update={"actions": actions}))
+    seen = set()
+    bfs._bfs(spec, spec.initial_state(0), lambda s: seen.add(s) or False, max_states=10**9)
+    return len(seen)
+
+
+def test_with_a_drop_action_the_check_first_searches_without_it(tmp_path):
+    """A dropped key may lie on any free cell, which multiplies the states; the states reached without
+    ``drop`` are reachable with it, so a maze that passes without it is checked within a small cap."""
+    key = "  - {name: yellow_key, kind: carrying, args: {type: key, color: yellow}}\n"
+    room = "########\n#A.....#\n#..y...#\n#......#\n#####Y##\n#....G.#\n########\n"
+    path = _user_task(tmp_path, room, extra_subgoals=key)
+    small, whole = _states(path, ["left", "right", "forward", "pickup", "toggle", "done"]), _states(path)
+    assert whole > 5 * small
+    assert bfs.check_reachable(path, max_states=small + 10) == []
+    assert bfs.check_reachable(path, max_states=small // 2) is None
+    # a walled-in red key: the search without drop misses it, the whole one (past the cap) cannot say
+    red = "  - {name: red_key, kind: carrying, args: {type: key, color: red}}\n"
+    pocket = "#########\n#A....#r#\n#..y..###\n#.......#\n######Y##\n#....G..#\n#########\n"
+    walled = _user_task(tmp_path, pocket, extra_subgoals=key + red)
+    small = _states(walled, ["left", "right", "forward", "pickup", "toggle", "done"])
+    assert bfs.check_reachable(walled, max_states=small + 10) is None
+    assert bfs.check_reachable(walled) == ["red_key"]
+    # here the red key blocks the corridor and must be put down behind the agent before the yellow one
+    # can be picked up: only the whole search reaches the goal
+    corridor = _user_task(tmp_path, "########\n#Ar.yYG#\n########\n", extra_subgoals=key + red)
+    assert bfs.check_reachable(corridor) == []
+    with pytest.raises(SpecError, match="cannot be reached"):
+        bfs.check_reachable(_user_task(tmp_path, "########\n#Ar.yYG#\n########\n",
+                                       actions="[left, right, forward, pickup, toggle]"))
 
 
 @pytest.mark.parametrize("task", ["keydoor", "fourroom", "threepair", "detour", "vault_moved", "keydoor_incorrect",
