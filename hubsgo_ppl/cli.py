@@ -240,7 +240,9 @@ def cmd_review(args: argparse.Namespace) -> int:
     flagged = [f"{c['u']}--{c['v']} (you: {c['human']}, J={c['J']:+.2f})" for c in r["flagged_edges"]]
     print(f"flagged edges (learned sign contradicts yours): {'; '.join(flagged) or 'none'}")
     drops = [f"{d['name']} (P={d['marginal']:.2f})" for d in r["suggested_drops"]]
-    print(f"suggested drops (P(w=1) < {r['threshold']:.2f}): {', '.join(drops) or 'none'}")
+    prior_only = (" (the critic has not updated on this run yet: its starting values, not what this run learned)"
+                  if drops and not r.get("critic_updates", 1) else "")
+    print(f"suggested drops (P(w=1) < {r['threshold']:.2f}): {', '.join(drops) or 'none'}{prior_only}")
     held = [f"{d['name']} ({d['success_frequency']:.0%}; edges to {', '.join(d['positive_edges']) or 'none'})"
             for d in r["held_by_edges"]]
     print(f"in G*, held by your positive edges, skipped by most successes: {'; '.join(held) or 'none'}")

@@ -260,6 +260,9 @@ def _review(run_dir: Path, resolved: dict[str, Any], env: Any, agent: Any, thres
         # the env step at which the agent settled (loop.settle_at; None: not yet), after which G* and the
         # marginals here come from the critic refitted on the recent successes at the likelihood's settled power
         "settled_step": getattr(agent, "settled_step", None),
+        # 0: this run has not updated the critic yet (an outcome critic waits for the first success), so
+        # the marginals and the suggested drops are its starting values (the prior, or a transferred critic)
+        "critic_updates": int(critic.num_updates),
         "threshold": float(threshold), "dead_band": float(dead_band), "num_samples": int(num_samples),
         "names": names,
         "g_star": ranking[0],
@@ -372,7 +375,10 @@ def render_markdown(r: dict[str, Any]) -> str:
                        f"({c['learned']}): {c['suggestion']}.")
     for d in r["suggested_drops"]:
         note = ""
-        if d["success_frequency"] is not None:
+        if not r.get("critic_updates", 1):
+            note = ("; the critic has not updated on this run yet: this is its starting value (your spec's prior, "
+                    "or the critic it was transferred from), not what this run learned")
+        elif d["success_frequency"] is not None:
             note = f"; achieved on {_pct(d['success_frequency'])} of the recent successes"
             if d["success_frequency"] >= 0.5:
                 note += " (the successes need it: check before dropping)"

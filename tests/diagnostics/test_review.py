@@ -46,6 +46,7 @@ def _edit_critic(run_dir, theta=None, coupling=None, outcomes=None):
         critic["theta"][i] = v
     for i, v in (coupling or {}).items():
         critic["coupling"][i] = v
+    critic["num_updates"] = max(1, int(critic["num_updates"]))      # these values stand for learned ones
     save_torch(path, ckpt)
     return critic["edges"]
 
@@ -258,3 +259,20 @@ def test_review_says_which_edge_holds_a_subgoal_the_successes_skip(run, tmp_path
     md = (run2 / "review" / "review.md").read_text()
     assert ("**yellow_key is in G* but only 25% of the recent successes achieved it**: your positive edges hold it "
             "there (yellow_key — yellow_door)") in md
+
+
+def test_drops_before_the_critics_first_update_are_called_its_starting_values(run, tmp_path, capsys):
+    """Before any evidence the marginals are the spec's prior: a drop suggested then is the human's own
+    knowledge read back, and the review says so; once the critic has updated it does not."""
+    r = review(run, out=tmp_path / "rv0", gif=False, threshold=0.5)     # no success in its 1,500 steps
+    assert r["critic_updates"] == 0 and r["suggested_drops"]
+    assert "the critic has not updated on this run yet: this is its starting value (your spec's prior" in (tmp_path / "rv0" / "review.md").read_text()
+    assert main(["review", str(run), "--out", str(tmp_path / "cli0"), "--no-gif", "--threshold", "0.5"]) == 0
+    assert "(the critic has not updated on this run yet: its starting values, not what this run learned)" in capsys.readouterr().out
+    learned = _copy(run, tmp_path / "learned")
+    _edit_critic(learned, theta={2: -6.0}, outcomes=[[1, 1, 0, 0, 1]])
+    r = review(learned, out=tmp_path / "rv1", gif=False, threshold=0.5)
+    assert r["critic_updates"] == 1 and r["suggested_drops"]
+    assert "has not updated" not in (tmp_path / "rv1" / "review.md").read_text()
+    assert main(["review", str(learned), "--out", str(tmp_path / "cli1"), "--no-gif", "--threshold", "0.5"]) == 0
+    assert "has not updated" not in capsys.readouterr().out
