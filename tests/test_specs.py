@@ -46,6 +46,7 @@ def test_valid_spec_builds_a_critic(tmp_path):
         ({"likelihood": {"name": "gaussian", "scale": 0}}, "likelihood", "scale must be > 0"),
         ({"subgoals": [], "edges": []}, "subgoals", "N = 0"),
         ({"prior": {"name": "dirichlet"}}, "prior", "registered: bernoulli, beta_bernoulli, ising"),
+        ({"prior": {"name": "ising", "strength": -3.0}}, "prior", "strength must be >= 0"),
         ({"likelihood": {"name": "cauchy"}}, "likelihood", "registered: gaussian, laplace, outcome, student_t"),
         ({"edges": [["a", "b", "strong"]]}, "edges[0][2]", "positive"),
         ({"graph": "dense"}, "graph", "fully_connected"),

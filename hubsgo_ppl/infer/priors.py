@@ -188,6 +188,10 @@ class IsingPrior(Prior):
         self.field = float(field)
         if not (math.isfinite(self.strength) and math.isfinite(self.field)):
             raise ValueError(f"ising prior: strength and field must be finite, got {strength!r}, {field!r}")
+        if self.strength < 0:
+            raise ValueError(f"ising prior: strength must be >= 0, got {strength!r}: it scales your edge signs, "
+                             "so a negative one would turn every positive edge negative; give an edge the "
+                             "sign negative instead")
 
     def params(self):
         return {"strength": self.strength, "field": self.field}
