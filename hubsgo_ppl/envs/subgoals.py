@@ -8,6 +8,7 @@ test and a target for the low level.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any, Literal
 
@@ -47,6 +48,22 @@ class Catalogue(StrictModel):
     # the whole catalogue's sub-goals when this one is a subset of it (``envs.subset``); an egocentric
     # maze observation measures its offsets to these, so dropping sub-goals leaves its shape alone
     observed: list[SubgoalDef] | None = Field(default=None, exclude=True)
+
+    @field_validator("task")
+    @classmethod
+    def _task_ok(cls, v: str) -> str:
+        if not v or not v.replace("_", "").replace("-", "").isalnum() or not v.isascii():
+            raise ValueError(f"task name {v!r} must be letters, digits, '_' or '-' (it is typed on the command line)")
+        return v
+
+    @field_validator("title")
+    @classmethod
+    def _title_ok(cls, v: str) -> str:
+        if v and not (v.replace("_", "").replace("-", "").replace(".", "").isalnum() and v.isascii()):
+            camel = "".join(w[:1].upper() + w[1:] for w in re.split(r"[^A-Za-z0-9]+", v)) or "MyMaze"
+            raise ValueError(f"title {v!r} names the Gymnasium id hubsgo/TITLE-v0, so it must be letters, digits, "
+                             f"'_', '-' or '.'; e.g. {camel!r}")
+        return v
 
     @field_validator("subgoals")
     @classmethod

@@ -47,3 +47,25 @@ def test_family_is_checked_and_models_build_directly(tmp_path):
         load_catalogue(_write(tmp_path, "task: t\nfamily: atari\nsubgoals: [{name: a, kind: goal}]\n"))
     cat = Catalogue(task="t", family="robosuite", subgoals=[SubgoalDef(name="lift-1", kind="grasp", args={"obj": 0})])
     assert cat.names == ["lift-1"] and cat.subgoals[0].args == {"obj": 0}
+
+
+@pytest.mark.parametrize("head, fragment", [
+    ("task: my maze", "task name 'my maze' must be letters, digits, '_' or '-'"),
+    ("task: t\ntitle: Moat, mirrored", "title 'Moat, mirrored' names the Gymnasium id hubsgo/TITLE-v0, so it must be "
+                                       "letters, digits, '_', '-' or '.'; e.g. 'MoatMirrored'"),
+])
+def test_a_task_name_or_title_that_cannot_name_a_gymnasium_id_is_refused(tmp_path, head, fragment):
+    path = _write(tmp_path, head + "\nfamily: minigrid\nsubgoals: [{name: a, kind: goal}]\n")
+    with pytest.raises(SpecError, match=fragment) as err:
+        load_catalogue(path)
+    assert str(path) in str(err.value)
+
+
+def test_every_shipped_title_makes_a_gymnasium_id_that_gymnasium_parses():
+    from gymnasium.envs.registration import parse_env_id
+
+    from hubsgo_ppl.envs import tasks
+
+    for name, info in tasks().items():
+        namespace, env_name, version = parse_env_id(info.env_id)
+        assert namespace == "hubsgo" and version == 0 and env_name, name
