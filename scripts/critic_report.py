@@ -40,6 +40,7 @@ ROUTES = {
     "vault": [set(p + ["green_door", "goal"]) for p in _PAIR],
     "detour": [{"red_key", "red_door", "goal"}, {"purple_key", "purple_door", "goal"}],
     "gallery": [{gap, "yellow_key", "yellow_door", "goal"} for gap in ("gap_north", "gap_south")],
+    "moat": [{"green_key", "green_door", "goal"}, {"ford", "goal"}],
 }
 ROUTES["vault_moved"] = ROUTES["vault"]
 

@@ -2,8 +2,8 @@
 
 A sweep file cannot express this (each target run starts from the source run of its seed), so this
 script runs it. For each pair (``keydoor -> keydoor_moved``, ``fourroom -> fourroom_moved``,
-``threepair -> threepair_moved``; ``vault -> vault_moved``, ``annex -> annex_wide`` and
-``gallery -> gallery_turned`` with ``--sources vault annex gallery``) and each
+``threepair -> threepair_moved``; ``vault -> vault_moved``, ``annex -> annex_wide``,
+``gallery -> gallery_turned`` and ``moat -> moat_mirror`` with ``--sources vault annex gallery moat``) and each
 seed: a HUBS-GO run on the source task at its budget, then runs on the target task at its budget,
 one per arm:
 
@@ -39,7 +39,7 @@ from measure_common import SMOKE, WINDOW, finish, guard_settings, parser, run_jo
 ROOT = Path(__file__).resolve().parents[1]
 PAIRS = {"keydoor": "keydoor_moved", "fourroom": "fourroom_moved", "threepair": "threepair_moved",
          "annex": "annex_wide", "gallery": "gallery_turned",
-         "vault": "vault_moved"}
+         "vault": "vault_moved", "moat": "moat_mirror"}
 DEFAULT_SOURCES = ["keydoor", "fourroom", "threepair"]     # the pairs of the transfer tables (docs/results.md)
 ARMS = {"scratch": None, "critic": ["critic"], "high": ["high"], "low": ["low"], "all": ["critic", "high", "low"],
         "all_restarted": ["critic", "high", "low"], "critic_low": ["critic", "low"]}

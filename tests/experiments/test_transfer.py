@@ -16,7 +16,7 @@ CLI_TINY = [a for item in TINY for a in ("--set", item)]
 
 
 #: the pairs whose grids differ in size observe egocentrically (the symbolic observation's shape is the grid's)
-EGO = {"annex": ["env.obs_mode=egocentric"], "gallery": ["env.obs_mode=egocentric"]}
+EGO = {"annex": ["env.obs_mode=egocentric"], "gallery": ["env.obs_mode=egocentric"], "moat": ["env.obs_mode=egocentric"]}
 
 
 def _source(root, task, seed=0):
@@ -36,12 +36,13 @@ def _source(root, task, seed=0):
 @pytest.fixture(scope="module")
 def sources(tmp_path_factory):
     root = tmp_path_factory.mktemp("transfer")
-    return {task: _source(root, task) for task in ("keydoor", "fourroom", "threepair", "vault", "annex", "gallery")}
+    return {task: _source(root, task) for task in ("keydoor", "fourroom", "threepair", "vault", "annex", "gallery", "moat")}
 
 
 @pytest.mark.parametrize("source, target", [("keydoor", "keydoor_moved"), ("fourroom", "fourroom_moved"),
                                             ("threepair", "threepair_moved"), ("vault", "vault_moved"),
-                                            ("annex", "annex_wide"), ("gallery", "gallery_turned")])
+                                            ("annex", "annex_wide"), ("gallery", "gallery_turned"),
+                                            ("moat", "moat_mirror")])
 def test_tiny_transfer_to_the_similar_task(sources, tmp_path, source, target):
     src = load_checkpoint(sources[source] / "checkpoint.pt")["agent"]
     assert src["filter"]["critic"]["num_updates"] > 0

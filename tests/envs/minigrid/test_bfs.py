@@ -159,7 +159,7 @@ def test_with_a_drop_action_the_check_first_searches_without_it(tmp_path):
 
 
 @pytest.mark.parametrize("task", ["keydoor", "fourroom", "threepair", "detour", "vault_moved", "keydoor_incorrect",
-                                  "annex_wide", "gallery", "gallery_turned"])
+                                  "annex_wide", "gallery", "gallery_turned", "moat", "moat_mirror"])
 def test_every_subgoal_of_the_shipped_mazes_is_reachable(task):
     assert bfs.check_reachable(task) == []
 
@@ -220,7 +220,8 @@ def test_transition_matches_minigrid_on_random_rollouts(tmp_path):
                                          ("vault", 26), ("vault_moved", 33), ("keydoor_n9", 19),
                                          ("keydoor_n17", 19), ("keydoor_n33", 19), ("keydoor_n65", 19),
                                          ("detour", 20), ("annex", 14), ("annex_wide", 18),
-                                         ("gallery", 19), ("gallery_turned", 27)])
+                                         ("gallery", 19), ("gallery_turned", 27), ("moat", 15),
+                                         ("moat_mirror", 15)])
 def test_new_mazes_have_their_bfs_optimum(task, steps):
     assert optimal_steps(task) == steps
 
