@@ -270,10 +270,19 @@ def cmd_render(args: argparse.Namespace) -> int:
     return 0
 
 
+class UsageError(Exception):
+    """A command line argparse refuses; ``main`` prints it as one line instead of the usage block."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):       # argparse prints the usage and exits; say it in one line instead
+        raise UsageError(f"{message}; see `{self.prog} --help`")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from .agents.factory import agent_names
 
-    p = argparse.ArgumentParser(prog="hubsgo", description="HUBS-GO: Bayesian sub-goal optimisation for HRL")
+    p = _Parser(prog="hubsgo", description="HUBS-GO: Bayesian sub-goal optimisation for HRL")
     sub = p.add_subparsers(dest="command", required=True)
 
     t = sub.add_parser("train", help="train an agent on a task and write a run directory")
@@ -385,7 +394,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     from .specs import SpecError
 
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args, extra = parser.parse_known_args(argv)
+        if extra:
+            raise UsageError(f"unrecognized arguments: {' '.join(extra)}; see `hubsgo {args.command} --help`")
+    except UsageError as exc:
+        print(f"hubsgo: error: {exc}", file=sys.stderr)
+        return 2
     try:
         return int(args.func(args) or 0)
     except (SpecError, RunError, CheckpointError, UnknownTaskError, FloatingPointError) as exc:

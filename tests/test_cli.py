@@ -365,3 +365,15 @@ def test_revise_and_transfer_bad_input_one_line(argv, needle, capsys, tmp_path):
         argv = argv + ["--out", str(tmp_path / "o"), "--no-progress"]
     assert main(argv) == 2
     assert needle in _one_error_line(capsys)
+
+
+@pytest.mark.parametrize("argv, line", [
+    (["train", "keydoor", "--bogus", "3"], "unrecognized arguments: --bogus 3; see `hubsgo train --help`"),
+    (["train", "keydoor", "--steps", "abc"], "argument --steps: invalid int value: 'abc'; see `hubsgo train --help`"),
+    (["train"], "the following arguments are required: task; see `hubsgo train --help`"),
+    (["trian", "keydoor"], "argument command: invalid choice: 'trian'"),
+])
+def test_a_command_line_argparse_refuses_gets_one_line(capsys, argv, line):
+    assert main(argv) == 2
+    assert line in _one_error_line(capsys)
+    assert capsys.readouterr().out == ""
