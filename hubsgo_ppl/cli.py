@@ -57,7 +57,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     cfg = RunConfig(task=args.task, agent=args.agent, model=args.model, graph=args.graph, steps=args.steps,
                     seed=args.seed, low_level=args.low_level, overrides=args.set or [], init_from=args.init_from,
                     transfer=args.transfer.split(",") if args.transfer is not None else None,
-                    restart_schedules=args.restart_schedules)
+                    restart_schedules=args.restart_schedules, checkpoint_steps=args.checkpoint_steps)
     summary = train(cfg, out, resume=args.resume, progress=not args.no_progress, stop_at=args.stop_at)
     _print_summary(summary, out)
     return 0
@@ -281,6 +281,7 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     from .agents.factory import agent_names
+    from .experiments.run import CHECKPOINT_STEPS
 
     p = _Parser(prog="hubsgo", description="HUBS-GO: Bayesian sub-goal optimisation for HRL")
     sub = p.add_subparsers(dest="command", required=True)
@@ -298,6 +299,9 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--low-level", choices=["learned", "scripted"], help="low level (default: per family)")
     t.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override a hyperparameter, e.g. --set loop.option_steps=30 (repeatable)")
+    t.add_argument("--checkpoint-steps", type=int, default=CHECKPOINT_STEPS, metavar="N",
+                   help=f"env steps between checkpoints, which --resume continues from (default {CHECKPOINT_STEPS:,}; "
+                        "a resumed run keeps its own)")
     t.add_argument("--stop-at", type=int, metavar="STEP",
                    help="pause once this env step is reached (checkpointed; the schedules still span --steps): "
                         "review, then `hubsgo revise` or --resume")

@@ -377,3 +377,16 @@ def test_a_command_line_argparse_refuses_gets_one_line(capsys, argv, line):
     assert main(argv) == 2
     assert line in _one_error_line(capsys)
     assert capsys.readouterr().out == ""
+
+
+def test_train_checkpoints_every_checkpoint_steps_and_a_resumed_run_keeps_its_own(tmp_path):
+    from hubsgo_ppl.experiments.io import load_checkpoint
+
+    out = tmp_path / "run"
+    args = ["train", "keydoor", "--out", str(out), "--steps", "400", "--no-progress", *TINY]
+    assert main([*args, "--checkpoint-steps", "150", "--stop-at", "200"]) == 0
+    assert yaml.safe_load((out / "config.yaml").read_text())["checkpoint_steps"] == 150
+    paused = int(load_checkpoint(out / "checkpoint.pt")["agent"]["env_steps"])
+    assert 200 <= paused < 400
+    assert main([*args, "--resume"]) == 0          # the default would be 5,000; the run keeps 150
+    assert yaml.safe_load((out / "config.yaml").read_text())["checkpoint_steps"] == 150
