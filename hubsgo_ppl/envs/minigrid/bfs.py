@@ -34,7 +34,7 @@ MAX_STATES = 2_000_000
 class _Maze:
     """Static lookup tables of a spec, so each BFS expansion is a few dict/set probes."""
 
-    def __init__(self, spec: MazeSpec):
+    def __init__(self, spec: MazeSpec, put_back: bool = False):
         lay = spec.layout
         self.spec = spec
         self.walls = lay.walls
@@ -44,6 +44,8 @@ class _Maze:
         self.door_color = tuple(d.color for d in lay.doors)
         self.carriables = tuple((o.type, o.color) for o in lay.carriables)
         self.actions = tuple(spec.options.actions)
+        # put_back: an object may be dropped only on the cell it starts on (see check_reachable)
+        self.homes = spec.initial_state(0).objects if put_back else None
 
 
 def transition(spec_or_maze: MazeSpec | _Maze, s: MazeState, action: str) -> MazeState:
@@ -69,7 +71,7 @@ def transition(spec_or_maze: MazeSpec | _Maze, s: MazeState, action: str) -> Maz
     if action == "drop":
         empty = (front not in m.walls and door is None and obj < 0 and front != m.goal
                  and front not in m.lava)
-        if empty and s.carrying >= 0:
+        if empty and s.carrying >= 0 and (m.homes is None or front == m.homes[s.carrying]):
             objects = tuple(front if j == s.carrying else c for j, c in enumerate(s.objects))
             return s._replace(carrying=-1, objects=objects)
         return s
@@ -136,11 +138,13 @@ def _resolve(source: Any, start_dir: int | None) -> tuple[MazeSpec, list[MazeSta
 
 
 def _bfs(spec: MazeSpec, start: MazeState, done: Callable[[MazeState], bool],
-         max_states: int = MAX_STATES, strict: bool = True, moves_only: bool = False) -> list[int] | None:
+         max_states: int = MAX_STATES, strict: bool = True, moves_only: bool = False,
+         put_back: bool = False) -> list[int] | None:
     """The shortest action path from ``start`` to a state where ``done`` holds; None if there is none.
     Past ``max_states`` visited states: RuntimeError, or None with ``strict=False``. ``moves_only``:
-    only turns and forward steps, except a last action (pickup, toggle, ...) that makes ``done`` hold."""
-    m = _Maze(spec)
+    only turns and forward steps, except a last action (pickup, toggle, ...) that makes ``done`` hold.
+    ``put_back``: ``drop`` only puts an object back on the cell it starts on."""
+    m = _Maze(spec, put_back=put_back)
     if done(start):
         return []
     parent: dict[MazeState, tuple[MazeState, int] | None] = {start: None}
@@ -277,9 +281,10 @@ def check_reachable(source: Any, max_states: int = 300_000) -> list[str] | None:
     with more than ``max_states`` reachable states is not checked, and gives ``None``.
 
     With a ``drop`` action a key may lie on any free cell, which multiplies the states by the cells. The
-    search therefore first leaves ``drop`` out: every state it reaches is reachable with ``drop`` too,
-    so where that search reaches the goal and every sub-goal the maze passes. Only otherwise does the
-    whole search run."""
+    search therefore first leaves ``drop`` out, then allows it only to put an object back on the cell it
+    starts on (the way to swap one key for another). Every state those searches reach is reachable in
+    the task too, so where one of them reaches the goal and every sub-goal the maze passes. Only
+    otherwise does the whole search run."""
     spec, starts, _ = _resolve(source, None)
     names = list(spec.subgoal_names)
     goal = spec.layout.goal
@@ -292,10 +297,10 @@ def check_reachable(source: Any, max_states: int = 300_000) -> list[str] | None:
             reached.append(True)
         return False
 
-    def search(maze: MazeSpec) -> bool:     # False past max_states
+    def search(maze: MazeSpec, put_back: bool = False) -> bool:     # False past max_states
         for start in starts:    # one per start direction of a random one; with turns, the first reaches all
             try:
-                _bfs(maze, start, visit, max_states=max_states)
+                _bfs(maze, start, visit, max_states=max_states, put_back=put_back)
             except RuntimeError:
                 return False
             if reached:
@@ -306,6 +311,8 @@ def check_reachable(source: Any, max_states: int = 300_000) -> list[str] | None:
     if "drop" in actions:
         kept = [a for a in actions if a != "drop"]
         if search(replace(spec, options=spec.options.model_copy(update={"actions": kept}))) and reached and not unmet:
+            return []
+        if search(spec, put_back=True) and reached and not unmet:
             return []
     if not search(spec):
         return None

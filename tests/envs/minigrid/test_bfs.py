@@ -122,13 +122,14 @@ def test_check_reachable_refuses_an_unreachable_goal_and_names_unreachable_subgo
     assert bfs.check_reachable(_user_task(tmp_path, "######\n#A.#G#\n######\n"), max_states=1) is None
 
 
-def _states(path, actions=None):
-    """How many states a whole search from the start visits (with ``actions`` in place of the task's)."""
+def _states(path, actions=None, put_back=False):
+    """How many states a whole search from the start visits (with ``actions`` in place of the task's;
+    ``put_back``: dropping only on an object's starting cell)."""
     spec = load_maze_spec(path)
     if actions is not None:
         spec = replace(spec, options=spec.options.model_copy(update={"actions": actions}))
     seen = set()
-    bfs._bfs(spec, spec.initial_state(0), lambda s: seen.add(s) or False, max_states=10**9)
+    bfs._bfs(spec, spec.initial_state(0), lambda s: seen.add(s) or False, max_states=10**9, put_back=put_back)
     return len(seen)
 
 
@@ -156,6 +157,27 @@ def test_with_a_drop_action_the_check_first_searches_without_it(tmp_path):
     with pytest.raises(SpecError, match="cannot be reached"):
         bfs.check_reachable(_user_task(tmp_path, "########\n#Ar.yYG#\n########\n",
                                        actions="[left, right, forward, pickup, toggle]"))
+
+
+def test_a_maze_that_needs_one_key_swapped_for_another_object_is_checked_by_putting_it_back(tmp_path):
+    """Holding the yellow key, the agent must put it down to pick up the ball behind the door: the search
+    without drop misses the ball, and the one that only puts objects back on their starting cells finds
+    it within a cap that the whole search passes."""
+    ball = "  - {name: ball, kind: carrying, args: {type: ball, color: green}}\n"
+    path = _user_task(tmp_path, "#########\n#A.y#o..#\n#...Y..G#\n#########\n", extra_subgoals=ball)
+    kept = ["left", "right", "forward", "pickup", "toggle", "done"]
+    no_drop, put_back, whole = _states(path, kept), _states(path, put_back=True), _states(path)
+    assert no_drop < put_back < whole // 5
+    spec = load_maze_spec(path)
+    swap = bfs._bfs(spec, spec.initial_state(0), lambda s: bfs.holds(spec, s, 1), put_back=True)
+    names = [spec.options.actions[a] for a in swap]
+    assert names.count("drop") == 1 and names.count("pickup") == 2    # key up, key back, ball up
+    assert bfs.check_reachable(path, max_states=no_drop + put_back + 10) == []
+    assert bfs.check_reachable(path, max_states=put_back // 2) is None
+    # a maze nothing can be dropped in: the ball stays out of reach, and the whole search says so
+    assert bfs.check_reachable(_user_task(tmp_path, "#########\n#A.y#o..#\n#...Y..G#\n#########\n",
+                                          actions="[left, right, forward, pickup, toggle]",
+                                          extra_subgoals=ball)) == ["ball"]
 
 
 @pytest.mark.parametrize("task", ["keydoor", "fourroom", "threepair", "detour", "vault_moved", "keydoor_incorrect",
