@@ -14,6 +14,8 @@ that the human can revise the spec:
 - where G*'s top set and the recent successes disagree (:func:`prior_against_successes`): a sub-goal
   the human's positive edges keep in G* though most successes did without it, and one every success
   achieved that G* leaves out;
+- negative edges the successes contradict (:func:`negative_edges_against_successes`): two sub-goals
+  the human said exclude each other that at least half of the recent successes both achieved;
 - what the agent achieves: the frequency of each sub-goal over the filter's recent successful
   episodes (``CriticFilter.outcomes()``), and the success rate over the last K episodes of
   ``metrics.csv`` (with per-sub-goal frequencies when it has ``visited/<name>`` columns);
@@ -50,6 +52,7 @@ from ..experiments.logger import read_csv_rows
 from ..experiments.run import RunError, load_run
 
 __all__ = ["review", "compare_couplings", "human_edge_signs", "suggested_drops", "prior_against_successes",
+           "negative_edges_against_successes",
            "marginal_trend", "achieved_frequencies", "metrics_summary", "render_markdown", "plot_review_graph", "format_chosen", "DEAD_BAND", "REVIEW_FORMAT"]
 
 REVIEW_FORMAT = 1
@@ -139,6 +142,29 @@ def prior_against_successes(top: Sequence[str], names: Sequence[str], achieved: 
         elif n not in chosen and freq >= 1.0:
             out["needed_not_in_g_star"].append({"name": n, "success_frequency": freq, "positive_edges": positive(n)})
     return out
+
+
+def negative_edges_against_successes(outcomes: Any, names: Sequence[str], human: Mapping[frozenset, str],
+                                     most: float = 0.5) -> list[dict[str, Any]]:
+    """The human's negative edges whose two sub-goals at least ``most`` of the recent successful
+    episodes both achieved: ``{"u", "v", "both_frequency"}`` in the order of ``names``. An edge that
+    says "one excludes the other" between two steps of the route the agent takes holds the critic's
+    coupling negative (at the outcome likelihood's default power the successes cannot flip it), so the
+    learned sign never contradicts it; the successes do. Empty without successes."""
+    arr = np.asarray(outcomes.detach().cpu().numpy() if hasattr(outcomes, "detach") else outcomes, dtype=float)
+    arr = arr.reshape(-1, len(names))
+    if arr.shape[0] == 0:
+        return []
+    index = {n: i for i, n in enumerate(names)}
+    rows = []
+    for edge, sign in human.items():
+        if sign != "negative" or len(edge) != 2 or not edge <= index.keys():
+            continue
+        u, v = sorted(edge, key=index.__getitem__)
+        both = float((arr[:, index[u]] * arr[:, index[v]]).mean())
+        if both >= most:
+            rows.append({"u": u, "v": v, "both_frequency": both})
+    return sorted(rows, key=lambda r: (index[r["u"]], index[r["v"]]))
 
 
 def _previous_review(path: Path, names: list[str]) -> dict[str, Any] | None:
@@ -276,6 +302,7 @@ def _review(run_dir: Path, resolved: dict[str, Any], env: Any, agent: Any, thres
         "spec_edges_not_in_graph": spec_only,
         "suggested_drops": suggested_drops(marginals, threshold, achieved["frequency"]),
         **prior_against_successes(ranking[0]["subgoals"], names, achieved["frequency"], human),
+        "negative_edges_achieved_together": negative_edges_against_successes(agent.filter.outcomes(), names, human),
         "achieved": {"recent_successes": achieved, "metrics": metrics_summary(run_dir / "metrics.csv", names, last)},
         "episode": None,
         "files": {"json": "review.json", "markdown": "review.md", "mrf_graph": "mrf_graph.png"},
@@ -298,7 +325,8 @@ def _review(run_dir: Path, resolved: dict[str, Any], env: Any, agent: Any, thres
 
 def plot_review_graph(r: dict[str, Any], path: Path) -> Path:
     """The learned MRF (``diagnostics.plots.mrf_graph_figure``: node = P(w_i = 1), edge width = |J|,
-    colour = sign) with the flagged edges overlaid as red dashes and the suggested drops ringed in red."""
+    colour = sign) with the flagged edges, and the negative edges whose two sub-goals most successes both
+    achieved, overlaid as red dashes and the suggested drops ringed in red."""
     import networkx as nx
     from matplotlib.lines import Line2D
 
@@ -312,11 +340,13 @@ def plot_review_graph(r: dict[str, Any], path: Path) -> Path:
     ax = fig.axes[0]
     pos = nx.circular_layout(list(names)) if len(names) > 1 else {names[0]: np.zeros(2)}   # as mrf_graph_figure
     handles = []
-    for c in r["flagged_edges"]:
+    against = r["flagged_edges"] + r.get("negative_edges_achieved_together", [])
+    for c in against:
         (x0, y0), (x1, y1) = pos[c["u"]], pos[c["v"]]
         ax.plot([x0, x1], [y0, y1], color="red", lw=2.5, ls=(0, (4, 3)), zorder=1.5)
-    if r["flagged_edges"]:
-        handles.append(Line2D([], [], color="red", lw=2, ls=(0, (4, 3)), label="contradicts your sign"))
+    if against:
+        handles.append(Line2D([], [], color="red", lw=2, ls=(0, (4, 3)),
+                              label="contradicts your sign (learned J or the successes)"))
     drops = [d["name"] for d in r["suggested_drops"]]
     for n in drops:
         ax.scatter(*pos[n], s=3200, facecolors="none", edgecolors="red", linewidths=2, zorder=6)
@@ -390,6 +420,10 @@ def render_markdown(r: dict[str, Any]) -> str:
         edges = ", ".join(f"{d['name']} — {v}" for v in d["positive_edges"]) or "none"
         changes.append(f"- **{d['name']} is in G* but only {_pct(d['success_frequency'])} of the recent successes "
                        f"achieved it**: your positive edges hold it there ({edges}); remove them, or drop {d['name']}.")
+    for c in r.get("negative_edges_achieved_together", []):
+        changes.append(f"- **edge {c['u']} — {c['v']}**: you said *negative* (one excludes the other), yet "
+                       f"{_pct(c['both_frequency'])} of the recent successes achieved both; make it positive or "
+                       f"remove it.")
     for d in r["needed_not_in_g_star"]:
         edges = ", ".join(f"{d['name']} — {v}" for v in d["positive_edges"])
         hint = (f"its positive edges ({edges}) are not enough" if edges
@@ -423,9 +457,12 @@ def render_markdown(r: dict[str, Any]) -> str:
 
     lines += ["", "## Couplings: your edges and what the critic learned", "",
               "| edge | your sign | learned J | learned sign | verdict |", "|---|---|---:|---|---|"]
+    together = {frozenset((c["u"], c["v"])) for c in r.get("negative_edges_achieved_together", [])}
     for c in r["couplings"]:
         verdict = "**contradicts**" if c["contradicts"] else ("suggest a sign" if c["suggestion"] else "agrees"
                                                                if c["human"] != "unknown" else "-")
+        if frozenset((c["u"], c["v"])) in together:
+            verdict = "**the successes achieve both**"
         lines.append(f"| {c['u']} — {c['v']} | {c['human']} | {c['J']:+.3f} | {c['learned']} | {verdict} |")
     if not r["couplings"]:
         lines.append("| (the critic's graph has no edges) | | | | |")
