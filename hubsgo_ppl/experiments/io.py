@@ -170,6 +170,17 @@ def checkpoint_globals(path: str | Path) -> list[str]:
     return sorted(g for g in found if g not in allowed)
 
 
+def _first_sentence(text: str, limit: int = 120) -> str:
+    """The first sentence of an exception's first line, cut at a word (with "...") past ``limit`` characters."""
+    first = text.strip().splitlines()[0] if text.strip() else ""
+    end = first.find(". ")
+    if end >= 0:
+        first = first[:end + 1]
+    if len(first) > limit:
+        first = first[:limit].rsplit(" ", 1)[0] + "..."
+    return first
+
+
 def load_checkpoint(path: str | Path, mmap: bool = False) -> dict[str, Any]:
     """Load a checkpoint written by :func:`save_torch` (state_dicts, plain data and numpy arrays only)."""
     path = Path(path)
@@ -186,9 +197,8 @@ def load_checkpoint(path: str | Path, mmap: bool = False) -> dict[str, Any]:
                 f"{path}: refusing to load: the checkpoint holds pickled code or objects "
                 f"({', '.join(unsafe[:5])}), not only tensors and plain data; "
                 "use a checkpoint written by `hubsgo train`") from None
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
         raise CheckpointError(
-            f"{path}: checkpoint is corrupt or unreadable ({type(exc).__name__}: {first[:120]}); "
+            f"{path}: checkpoint is corrupt or unreadable ({type(exc).__name__}: {_first_sentence(str(exc))}); "
             "start a new run with another --out") from None
     if not isinstance(obj, dict) or "format" not in obj:
         raise CheckpointError(f"{path}: not a hubsgo checkpoint (no 'format' key); "

@@ -32,6 +32,13 @@ def test_checkpoint_roundtrip_and_clear_errors(tmp_path):
     (tmp_path / "bad.pt").write_bytes(b"\x00garbage" * 10)
     with pytest.raises(CheckpointError, match="corrupt"):
         load_checkpoint(tmp_path / "bad.pt")
+    # a truncated file: the reason is torch's first sentence, whole, not cut inside a word
+    good = (tmp_path / "c.pt").read_bytes()
+    (tmp_path / "cut.pt").write_bytes(good[: len(good) // 2])
+    with pytest.raises(CheckpointError) as err:
+        load_checkpoint(tmp_path / "cut.pt")
+    reason = str(err.value).split("(", 1)[1].rsplit(")", 1)[0]
+    assert reason.endswith((".", "...")) and "If yo" not in reason and len(reason) < 160
     save_torch(tmp_path / "other.pt", {"weights": 1})
     with pytest.raises(CheckpointError, match="not a hubsgo checkpoint"):
         load_checkpoint(tmp_path / "other.pt")
