@@ -422,8 +422,8 @@ def render_markdown(r: dict[str, Any]) -> str:
                        f"achieved it**: your positive edges hold it there ({edges}); remove them, or drop {d['name']}.")
     for c in r.get("negative_edges_achieved_together", []):
         changes.append(f"- **edge {c['u']} — {c['v']}**: you said *negative* (one excludes the other), yet "
-                       f"{_pct(c['both_frequency'])} of the recent successes achieved both; make it positive or "
-                       f"remove it.")
+                       f"{_pct(c['both_frequency'])} of the recent successes achieved both; remove it, or make it "
+                       f"positive if the route needs both (an agent may also pass a sub-goal it does not need).")
     for d in r["needed_not_in_g_star"]:
         edges = ", ".join(f"{d['name']} — {v}" for v in d["positive_edges"])
         hint = (f"its positive edges ({edges}) are not enough" if edges

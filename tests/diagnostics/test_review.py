@@ -273,7 +273,7 @@ def test_review_names_a_negative_edge_between_two_subgoals_the_successes_both_ac
     md = (run2 / "review" / "review.md").read_text()
     c = r["negative_edges_achieved_together"][0]
     assert (f"**edge {c['u']} — {c['v']}**: you said *negative* (one excludes the other), yet 75% of the recent "
-            "successes achieved both") in md
+            "successes achieved both; remove it, or make it positive if the route needs both") in md
     assert f"| {c['u']} — {c['v']} | negative |" in md and "**the successes achieve both**" in md
     assert main(["review", str(run2), "--no-gif", "--out", str(tmp_path / "cli")]) == 0
     assert f"both ends achieved by most successes: {c['u']}--{c['v']} (75%)" in capsys.readouterr().out
