@@ -41,6 +41,7 @@ ROUTES = {
     "detour": [{"red_key", "red_door", "goal"}, {"purple_key", "purple_door", "goal"}],
     "gallery": [{gap, "yellow_key", "yellow_door", "goal"} for gap in ("gap_north", "gap_south")],
     "moat": [{"green_key", "green_door", "goal"}, {"ford", "goal"}],
+    "chain": [{"red_key", "red_door", "blue_key", "blue_door", "goal"}],
 }
 ROUTES["vault_moved"] = ROUTES["vault"]
 

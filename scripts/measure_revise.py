@@ -7,7 +7,8 @@ script runs it. For each task with misleading sub-goals and each seed, at the ta
   critic, write the corrected spec (drop every suggested sub-goal that fewer than half of the recent
   successes achieved, with its edges; give each flagged edge its learned sign; with ``--unlink-held``
   also remove the positive edges that the review says hold a sub-goal in G* which most successes
-  skipped), revise, continue to B;
+  skipped; with ``--unlink-together`` also remove the negative edges whose two sub-goals most recent
+  successes both achieved), revise, continue to B;
 - ``unrevised``: the same paused run (a copy taken before the revision) continued to B as it was;
 - ``restart``: a run from scratch with the corrected spec of the same seed, budget B.
 
@@ -23,7 +24,8 @@ length of the 20th to 60th of those episodes.
 Everything goes under ``--out``: one folder per task, seed and arm, ``results.csv`` (one row per run)
 and ``summary.md``. Re-running skips finished runs (the runs are ordinary run directories), so ``--out``
 remembers its settings (``settings.json``: ``--steps``, ``--set``, ``--threshold``, ``--keep-linked``,
-and ``--unlink-held`` where given) and refuses other ones; more seeds or tasks may be added.
+and ``--unlink-held`` and ``--unlink-together`` where given) and refuses other ones; more seeds or tasks
+may be added.
 
     .venv/bin/python scripts/measure_revise.py --out runs/measure_revise            # 2 tasks x 5 seeds, 40,000 steps
     .venv/bin/python scripts/measure_revise.py --out runs/smoke_revise --smoke        # a pipeline check in a minute
@@ -67,12 +69,14 @@ def run_stats(run: Path, budget: int, pause: int | None = None) -> dict[str, flo
 
 
 def corrected_spec(review: dict[str, Any], spec: dict[str, Any], path: Path, keep_linked: bool = False,
-                   unlink_held: bool = False) -> Path:
+                   unlink_held: bool = False, unlink_together: bool = False) -> Path:
     """The human's revision of ``spec`` after ``review`` (module docstring), written to ``path``.
     ``keep_linked``: a human who drops only suggested sub-goals that no edge of the spec joins to
     another sub-goal (the route not taken stays; sub-goals the human related to nothing go).
     ``unlink_held``: a human who also removes the positive edges that hold a sub-goal in G* though
-    most recent successes skipped it (``review["held_by_edges"]``); the sub-goal stays a candidate."""
+    most recent successes skipped it (``review["held_by_edges"]``); the sub-goal stays a candidate.
+    ``unlink_together``: a human who also removes the negative edges whose two sub-goals most recent
+    successes both achieved (``review["negative_edges_achieved_together"]``)."""
 
     linked = {n for u, v, _ in spec["edges"] for n in (u, v)}
     drop = {d["name"] for d in review["suggested_drops"]
@@ -84,6 +88,8 @@ def corrected_spec(review: dict[str, Any], spec: dict[str, Any], path: Path, kee
     flip = {frozenset((c["u"], c["v"])): c["learned"] for c in review["flagged_edges"]}
     held = review.get("held_by_edges", []) if unlink_held else []
     unlink = {frozenset((d["name"], v)) for d in held for v in d["positive_edges"]}
+    if unlink_together:
+        unlink |= {frozenset((c["u"], c["v"])) for c in review.get("negative_edges_achieved_together", [])}
     new = dict(spec, name=f"{spec['name']}-revised", subgoals=keep,
                edges=[[u, v, flip.get(frozenset((u, v)), s)] for u, v, s in spec["edges"]
                       if u not in drop and v not in drop and frozenset((u, v)) not in unlink])
@@ -106,7 +112,7 @@ def g_star(run: Path, task: str) -> dict[str, float]:
 
 
 def one(task: str, seed: int, out: Path, steps: int | None, overrides: list[str], threshold: float,
-        keep_linked: bool = False, unlink_held: bool = False) -> list[dict]:
+        keep_linked: bool = False, unlink_held: bool = False, unlink_together: bool = False) -> list[dict]:
     """The three arms of one (task, seed); returns one result row per arm."""
     import torch
     import yaml
@@ -136,7 +142,7 @@ def one(task: str, seed: int, out: Path, steps: int | None, overrides: list[str]
         shutil.copytree(runs["revised"], runs["unrevised"])
         r = review(runs["revised"], threshold=threshold, gif=False, num_samples=2_000)
         spec = load_checkpoint(runs["revised"] / "checkpoint.pt")["config"]["model_spec"]
-        corrected_spec(r, spec, spec_path, keep_linked, unlink_held)
+        corrected_spec(r, spec, spec_path, keep_linked, unlink_held, unlink_together)
         revise(runs["revised"], spec_path, progress=False)
         train(RunConfig(task=task), runs["unrevised"], resume=True, progress=False)
     if not finished(runs["restart"]):
@@ -172,6 +178,8 @@ def main(argv: list[str] | None = None) -> int:
                    help="drop only suggested sub-goals that no edge of the spec joins to another one")
     p.add_argument("--unlink-held", action="store_true",
                    help="also remove the positive edges that hold a sub-goal in G* which most successes skipped")
+    p.add_argument("--unlink-together", action="store_true",
+                   help="also remove the negative edges whose two sub-goals most recent successes both achieved")
     args = p.parse_args(argv)
     overrides: list[str] = list(args.overrides)
     if args.smoke:
@@ -180,8 +188,10 @@ def main(argv: list[str] | None = None) -> int:
     settings = {"steps": args.steps, "overrides": overrides, "threshold": args.threshold, "keep_linked": args.keep_linked}
     if args.unlink_held:            # recorded only where given: folders made before the option still match
         settings["unlink_held"] = True
+    if args.unlink_together:
+        settings["unlink_together"] = True
     guard_settings(out, "measure_revise", settings)
-    jobs = [(t, s, out, args.steps, overrides, args.threshold, args.keep_linked, args.unlink_held)
+    jobs = [(t, s, out, args.steps, overrides, args.threshold, args.keep_linked, args.unlink_held, args.unlink_together)
             for t in args.tasks for s in args.seeds]
     return finish(run_jobs(one, jobs, args.workers), out, summarise)
 

@@ -12,7 +12,7 @@ TINY = ["high.learning_starts=8", "high.batch_size=8", "low.learning_starts=64",
 
 
 @pytest.mark.parametrize("task", ["threepair", "twowall", "keydoor_n17", "keydoor_n65", "vault", "detour", "annex",
-                                  "gallery", "moat"])
+                                  "gallery", "moat", "chain"])
 def test_tiny_hubsgo_run_on_each_new_maze(task, tmp_path):
     from hubsgo_ppl.envs import get_task
 

@@ -85,6 +85,22 @@ def test_unlink_held_removes_only_the_positive_edges_the_review_names(tmp_path):
     assert new["edges"] == [["r_key", "r_door", "positive"], ["r_door", "goal", "positive"]]
 
 
+def test_unlink_together_removes_only_the_negative_edges_the_successes_contradict(tmp_path):
+    import yaml
+
+    spec = {"name": "toy", "task": "chain", "subgoals": ["r_key", "r_door", "b_key", "b_door", "goal"],
+            "edges": [["r_key", "r_door", "positive"], ["b_key", "b_door", "positive"], ["r_key", "b_key", "negative"],
+                      ["r_door", "b_door", "negative"], ["b_door", "goal", "positive"]]}
+    review = {"suggested_drops": [], "flagged_edges": [],
+              "negative_edges_achieved_together": [{"u": "r_key", "v": "b_key", "both_frequency": 0.9}]}
+    kept = yaml.safe_load(measure_revise.corrected_spec(review, spec, tmp_path / "kept.yaml").read_text())
+    assert kept["edges"] == spec["edges"]                              # without the option: as before
+    new = yaml.safe_load(measure_revise.corrected_spec(review, spec, tmp_path / "new.yaml",
+                                                       unlink_together=True).read_text())
+    assert new["subgoals"] == spec["subgoals"]
+    assert new["edges"] == [e for e in spec["edges"] if e[:2] != ["r_key", "b_key"]]
+
+
 def test_g_star_reads_whether_the_top_set_is_one_route(tmp_path):
     import json
 

@@ -181,7 +181,8 @@ def test_a_maze_that_needs_one_key_swapped_for_another_object_is_checked_by_putt
 
 
 @pytest.mark.parametrize("task", ["keydoor", "fourroom", "threepair", "detour", "vault_moved", "keydoor_incorrect",
-                                  "annex_wide", "gallery", "gallery_turned", "moat", "moat_mirror"])
+                                  "annex_wide", "gallery", "gallery_turned", "moat", "moat_mirror",
+                                  "chain"])
 def test_every_subgoal_of_the_shipped_mazes_is_reachable(task):
     assert bfs.check_reachable(task) == []
 
@@ -243,7 +244,7 @@ def test_transition_matches_minigrid_on_random_rollouts(tmp_path):
                                          ("keydoor_n17", 19), ("keydoor_n33", 19), ("keydoor_n65", 19),
                                          ("detour", 20), ("annex", 14), ("annex_wide", 18),
                                          ("gallery", 19), ("gallery_turned", 27), ("moat", 15),
-                                         ("moat_mirror", 15)])
+                                         ("moat_mirror", 15), ("chain", 21)])
 def test_new_mazes_have_their_bfs_optimum(task, steps):
     assert optimal_steps(task) == steps
 
