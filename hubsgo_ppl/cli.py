@@ -263,12 +263,12 @@ def cmd_review(args: argparse.Namespace) -> int:
 
 def cmd_render(args: argparse.Namespace) -> int:
     from .diagnostics.render import render_episode
-    from .diagnostics.review import format_chosen
+    from .diagnostics.review import CHOSEN_SHOWN, format_chosen
 
     r = render_episode(args.run_dir, args.out, seed=args.seed, tile_size=args.tile_size, fps=args.fps)
     outcome = "success" if r["success"] else "no success"
     print(f"{r['path']}: {r['frames']} frames, one greedy episode of {r['length']} steps (env seed {r['env_seed']}, "
-          f"return {r['return']:.4f}, {outcome}); sub-goals chosen: {format_chosen(r['chosen'])}")
+          f"return {r['return']:.4f}, {outcome}); sub-goals chosen: {format_chosen(r['chosen'], limit=CHOSEN_SHOWN)}")
     return 0
 
 

@@ -56,6 +56,8 @@ __all__ = ["review", "compare_couplings", "human_edge_signs", "suggested_drops",
            "marginal_trend", "achieved_frequencies", "metrics_summary", "render_markdown", "plot_review_graph", "format_chosen", "DEAD_BAND", "REVIEW_FORMAT"]
 
 REVIEW_FORMAT = 1
+#: the sub-goals chosen in a reported episode are listed up to this many runs of one sub-goal, then counted
+CHOSEN_SHOWN = 30
 #: |J| at or below this counts as "no learned sign": it neither contradicts nor suggests a sign
 DEAD_BAND = 0.1
 _SIGN_WORDS = {1: "positive", -1: "negative", 0: "unknown"}
@@ -365,15 +367,19 @@ def plot_review_graph(r: dict[str, Any], path: Path) -> Path:
 
 # -- the report for people ------------------------------------------------------------------------
 
-def format_chosen(chosen: Sequence[str]) -> str:
-    """``a, a, b`` as ``a x2, b``."""
+def format_chosen(chosen: Sequence[str], limit: int | None = None) -> str:
+    """``a, a, b`` as ``a x2, b``; past ``limit`` such runs, the count of the options left
+    (a failed episode of a few thousand steps chooses a hundred sub-goals or more)."""
     out: list[list[Any]] = []
     for c in chosen:
         if out and out[-1][0] == c:
             out[-1][1] += 1
         else:
             out.append([c, 1])
-    return ", ".join(c if k == 1 else f"{c} x{k}" for c, k in out)
+    text = ", ".join(c if k == 1 else f"{c} x{k}" for c, k in out[:limit])
+    if limit is not None and len(out) > limit:
+        text += f", ... ({sum(k for _, k in out[limit:])} more)"
+    return text
 
 
 def _delta(d: float) -> str:
@@ -487,7 +493,7 @@ def render_markdown(r: dict[str, Any]) -> str:
     if ep and "frames" in ep:
         outcome = "success" if ep["success"] else "no success"
         lines += [f"One greedy episode ({ep['length']} steps, return {ep['return']:.3f}, {outcome}; sub-goals chosen: "
-                  f"{format_chosen(ep['chosen'])}). Magenta: the current sub-goal's cell; cyan: the other sub-goals of Ĝt.",
+                  f"{format_chosen(ep['chosen'], limit=CHOSEN_SHOWN)}). Magenta: the current sub-goal's cell; cyan: the other sub-goals of Ĝt.",
                   "", "![greedy episode](episode.gif)", ""]
     elif ep and "skipped" in ep:
         lines += [f"No episode GIF: {ep['skipped']}.", ""]

@@ -226,6 +226,9 @@ def test_drops_and_trend_on_hand_made_marginals():
     assert t["delta"] == pytest.approx({"a": -0.05, "b": 0.0, "c": 0.19, "d": -0.8})
     assert marginal_trend(marg, None)["delta"] is None
     assert format_chosen(["a", "a", "b", "a"]) == "a x2, b, a"
+    # a long failed episode: the first runs, then how many options are left
+    assert format_chosen(["a", "b"] * 20 + ["c", "c"], limit=3) == "a, b, a, ... (39 more)"
+    assert format_chosen(["a", "a", "b"], limit=2) == "a x2, b"
 
 
 def test_prior_against_successes_names_what_the_edges_hold_in_and_what_the_successes_need():
