@@ -258,6 +258,9 @@ def cmd_review(args: argparse.Namespace) -> int:
         print("achieved on recent successes: no successful episode yet")
     for kind, name in r["files"].items():
         print(f"{kind}: {out / name}")
+    if "suggested_spec" in r["files"]:
+        print(f"to revise: edit {out / r['files']['suggested_spec']}, then "
+              f"`hubsgo revise {r['run_dir']} --model {out / r['files']['suggested_spec']}`")
     return 0
 
 

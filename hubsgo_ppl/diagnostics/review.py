@@ -31,8 +31,10 @@ Usage::
 
 Into ``RUN/review/`` (or ``--out``), each file written atomically: ``review.json`` (for programs; it
 keeps this review's marginals, which the next review's trend is measured against), ``review.md`` (for
-people), ``mrf_graph.png`` (the learned MRF with the marginals) and, on MiniGrid mazes,
-``episode.gif`` (one greedy episode, :mod:`hubsgo_ppl.diagnostics.render`; ``--no-gif`` skips it).
+people), ``suggested_spec.yaml`` (the run's spec with the review's suggestions applied,
+:func:`suggested_spec`: a starting point to edit and pass to ``hubsgo revise``), ``mrf_graph.png`` (the
+learned MRF with the marginals) and, on MiniGrid mazes, ``episode.gif`` (one greedy episode,
+:mod:`hubsgo_ppl.diagnostics.render`; ``--no-gif`` skips it).
 The review reads the run and writes only into its own folder; it refuses runs without a sub-goal
 critic (h-DQN and the flat baselines) with one line.
 """
@@ -46,13 +48,14 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
+import yaml
 
 from ..experiments.io import write_json, write_text
 from ..experiments.logger import read_csv_rows
 from ..experiments.run import RunError, load_run
 
 __all__ = ["review", "compare_couplings", "human_edge_signs", "suggested_drops", "prior_against_successes",
-           "negative_edges_against_successes",
+           "negative_edges_against_successes", "suggested_spec",
            "marginal_trend", "achieved_frequencies", "metrics_summary", "render_markdown", "plot_review_graph", "format_chosen", "DEAD_BAND", "REVIEW_FORMAT"]
 
 REVIEW_FORMAT = 1
@@ -167,6 +170,41 @@ def negative_edges_against_successes(outcomes: Any, names: Sequence[str], human:
         if both >= most:
             rows.append({"u": u, "v": v, "both_frequency": both})
     return sorted(rows, key=lambda r: (index[r["u"]], index[r["v"]]))
+
+
+def suggested_spec(r: Mapping[str, Any], spec: Mapping[str, Any], rare: float = 0.5) -> dict[str, Any]:
+    """The spec ``spec`` (a run's resolved model spec) with the suggestions of review ``r`` applied, for
+    the human to edit and pass to ``hubsgo revise``:
+
+    - drop each suggested sub-goal that fewer than ``rare`` of the recent successes achieved, with its
+      edges (without successes, or before the critic's first update, nothing is dropped: the marginals
+      are then the prior's, not evidence);
+    - give each flagged edge its learned sign, and each edge left unknown with a learned sign that sign;
+    - remove each negative edge whose two sub-goals most recent successes both achieved, and each
+      positive edge that holds in G* a sub-goal most recent successes skipped.
+
+    A sub-goal every success achieved that G* leaves out needs an edge only the human can choose, so
+    it is left as it is; so is the goal. The name gains ``-reviewed``. At least one sub-goal stays."""
+    learned = r.get("critic_updates", 1) > 0
+    drop = {d["name"] for d in r.get("suggested_drops", []) if learned and d.get("success_frequency") is not None
+            and d["success_frequency"] < rare}
+    keep = [n for n in spec["subgoals"] if n not in drop]
+    if not keep:
+        keep, drop = list(spec["subgoals"]), set()
+    sign = {frozenset((c["u"], c["v"])): c["learned"] for c in r.get("flagged_edges", []) + r.get("suggested_signs", [])}
+    unlink = {frozenset((c["u"], c["v"])) for c in r.get("negative_edges_achieved_together", [])}
+    unlink |= {frozenset((d["name"], v)) for d in r.get("held_by_edges", []) for v in d["positive_edges"]}
+    edges, seen = [], set()
+    for u, v, s in spec.get("edges", []):
+        e = frozenset((u, v))
+        seen.add(e)
+        if u not in drop and v not in drop and e not in unlink:
+            edges.append([u, v, sign.get(e, s)])
+    for c in r.get("suggested_signs", []):         # an unknown edge of a graph preset, not in the spec
+        e = frozenset((c["u"], c["v"]))
+        if e not in seen and not e & drop:
+            edges.append([c["u"], c["v"], c["learned"]])
+    return {**spec, "name": f"{spec['name']}-reviewed", "subgoals": keep, "edges": edges}
 
 
 def _previous_review(path: Path, names: list[str]) -> dict[str, Any] | None:
@@ -307,6 +345,7 @@ def _review(run_dir: Path, resolved: dict[str, Any], env: Any, agent: Any, thres
         "negative_edges_achieved_together": negative_edges_against_successes(agent.filter.outcomes(), names, human),
         "achieved": {"recent_successes": achieved, "metrics": metrics_summary(run_dir / "metrics.csv", names, last)},
         "episode": None,
+        "review_dir": str(out),
         "files": {"json": "review.json", "markdown": "review.md", "mrf_graph": "mrf_graph.png"},
     }
     out.mkdir(parents=True, exist_ok=True)
@@ -320,6 +359,13 @@ def _review(run_dir: Path, resolved: dict[str, Any], env: Any, agent: Any, thres
         result["files"]["gif"] = "episode.gif"
     elif resolved.get("family") != "minigrid":
         result["episode"] = {"skipped": "render supports MiniGrid mazes"}
+    if resolved.get("model_spec"):
+        head = (f"# {resolved['model_spec'].get('name')} with the suggestions of the review of {run_dir} at env step "
+                f"{result['env_steps']:,} applied (review.md lists them).\n# Edit it, then: hubsgo revise {run_dir} "
+                f"--model THIS_FILE\n")
+        body = yaml.safe_dump(suggested_spec(result, resolved["model_spec"]), sort_keys=False, default_flow_style=None)
+        write_text(out / "suggested_spec.yaml", head + body)
+        result["files"]["suggested_spec"] = "suggested_spec.yaml"
     write_text(out / "review.md", render_markdown(result))
     write_json(out / "review.json", result)    # last: the next review's baseline only once all is written
     return result
@@ -438,6 +484,11 @@ def render_markdown(r: dict[str, Any]) -> str:
                        f"edge to the sub-goal it goes with, or raise the outcome likelihood's power.")
     lines += changes or [f"None: every learned coupling agrees with your edge signs, and every sub-goal has "
                          f"P(w = 1) >= {r['threshold']:.2f}."]
+    if "suggested_spec" in r["files"]:
+        lines += ["", "`suggested_spec.yaml`, next to this file, is your spec with these changes applied (sub-goals "
+                  "dropped only where fewer than half of the recent successes achieved them; nothing added): edit "
+                  f"it, then `hubsgo revise {r['run_dir']} --model "
+                  f"{Path(r.get('review_dir', '.')) / r['files']['suggested_spec']}`."]
 
     lines += ["", f"## G*: the most probable sub-goal sets ({r['num_samples']:,} critic samples)", "",
               "| rank | P(sample) | P(exact) | sub-goals |", "|---:|---:|---:|---|"]

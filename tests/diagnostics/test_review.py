@@ -12,7 +12,7 @@ from hubsgo_ppl.experiments.io import load_checkpoint, save_torch
 from hubsgo_ppl.experiments.logger import read_csv_rows
 from hubsgo_ppl.diagnostics.review import (compare_couplings, format_chosen, human_edge_signs, marginal_trend,
                                            negative_edges_against_successes, prior_against_successes, review,
-                                           suggested_drops)
+                                           suggested_drops, suggested_spec)
 from hubsgo_ppl.experiments.run import RunConfig, RunError, load_run, train
 
 TINY = ["high.learning_starts=8", "high.batch_size=8", "low.learning_starts=64", "low.batch_size=32",
@@ -280,10 +280,50 @@ def test_review_names_a_negative_edge_between_two_subgoals_the_successes_both_ac
     assert f"| {c['u']} — {c['v']} | negative |" in md and "**the successes achieve both**" in md
     assert main(["review", str(run2), "--no-gif", "--out", str(tmp_path / "cli")]) == 0
     assert f"both ends achieved by most successes: {c['u']}--{c['v']} (75%)" in capsys.readouterr().out
+    # the suggested spec leaves that edge out, and a revision takes it as it is
+    import yaml
+
+    from hubsgo_ppl.experiments.revise import revise
+
+    path = run2 / "review" / "suggested_spec.yaml"
+    suggested = yaml.safe_load(path.read_text())
+    assert r["files"]["suggested_spec"] == "suggested_spec.yaml" and suggested["name"].endswith("-reviewed")
+    assert not any({u, v} == {"yellow_key", "blue_key"} for u, v, _ in suggested["edges"])
+    assert f"hubsgo revise {run2} --model {path}" in md
+    record = revise(run2, path, steps=2000, train_after=False)["revision"]
+    assert {"yellow_key--blue_key", "blue_key--yellow_key"} & set(record["edges_dropped"])
     # one success of four holding both keys: nothing is named
     _edit_critic(run2, outcomes=[[1 if n in ("yellow_key", "yellow_door", "goal") or (n == "blue_key" and k == 0)
                                   else 0 for n in names] for k in range(4)])
     assert review(run2, threshold=0.2, gif=False)["negative_edges_achieved_together"] == []
+
+
+def test_the_suggested_spec_applies_the_reviews_changes_and_adds_nothing():
+    spec = {"name": "toy", "task": "keydoor", "graph": "specific", "prior": {"name": "ising"},
+            "subgoals": ["key", "door", "goal", "corner", "other", "ball"],
+            "edges": [["key", "door", "positive"], ["door", "goal", "negative"], ["corner", "goal", "positive"],
+                      ["key", "ball", "negative"], ["other", "key", "unknown"], ["ball", "goal", "unknown"]]}
+    r = {"critic_updates": 3,
+         "suggested_drops": [{"name": "other", "success_frequency": 0.1}, {"name": "ball", "success_frequency": 0.6},
+                             {"name": "goal", "success_frequency": None}],
+         "flagged_edges": [{"u": "door", "v": "goal", "learned": "positive"}],
+         "suggested_signs": [{"u": "ball", "v": "goal", "learned": "negative"},
+                             {"u": "corner", "v": "door", "learned": "negative"}],
+         "negative_edges_achieved_together": [{"u": "key", "v": "ball", "both_frequency": 0.7}],
+         "held_by_edges": [{"name": "corner", "success_frequency": 0.2, "positive_edges": ["goal"]}],
+         "needed_not_in_g_star": [{"name": "key", "success_frequency": 1.0, "positive_edges": []}]}
+    new = suggested_spec(r, spec)
+    # "other" goes (10% of the successes), "ball" stays (60%: the successes need it), and so does the goal
+    # (no successes were counted for it); its flagged edge takes the learned sign, the unknown edge its
+    # suggested sign, the graph preset's edge is added, and the edges the successes contradict go
+    assert new["name"] == "toy-reviewed" and new["subgoals"] == ["key", "door", "goal", "corner", "ball"]
+    assert new["edges"] == [["key", "door", "positive"], ["door", "goal", "positive"], ["ball", "goal", "negative"],
+                            ["corner", "door", "negative"]]
+    assert {k: new[k] for k in ("task", "graph", "prior")} == {k: spec[k] for k in ("task", "graph", "prior")}
+    # before the critic's first update the marginals are the prior's: nothing is dropped
+    assert suggested_spec({**r, "critic_updates": 0}, spec)["subgoals"] == spec["subgoals"]
+    # no suggestions: the spec as it was, renamed
+    assert suggested_spec({}, spec) == {**spec, "name": "toy-reviewed"}
 
 
 def test_review_says_which_edge_holds_a_subgoal_the_successes_skip(run, tmp_path):
