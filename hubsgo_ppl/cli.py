@@ -249,7 +249,7 @@ def cmd_review(args: argparse.Namespace) -> int:
     needed = [d["name"] for d in r["needed_not_in_g_star"]]
     print(f"achieved by every recent success, not in G*: {', '.join(needed) or 'none'}")
     together = [f"{c['u']}--{c['v']} ({c['both_frequency']:.0%})" for c in r.get("negative_edges_achieved_together", [])]
-    print(f"your negative edges, both ends achieved by most successes: {'; '.join(together) or 'none'}")
+    print(f"your negative edges, both ends achieved by every recent success: {'; '.join(together) or 'none'}")
     succ = r["achieved"]["recent_successes"]
     if succ["episodes"]:
         print(f"achieved on the {succ['episodes']} recent successes: "

@@ -7,8 +7,8 @@ script runs it. For each task with misleading sub-goals and each seed, at the ta
   critic, write the corrected spec (drop every suggested sub-goal that fewer than half of the recent
   successes achieved, with its edges; give each flagged edge its learned sign; with ``--unlink-held``
   also remove the positive edges that the review says hold a sub-goal in G* which most successes
-  skipped; with ``--unlink-together`` also remove the negative edges whose two sub-goals most recent
-  successes both achieved), revise, continue to B;
+  skipped; with ``--unlink-together`` also remove the negative edges whose two sub-goals every recent
+  success achieved), revise, continue to B;
 - ``unrevised``: the same paused run (a copy taken before the revision) continued to B as it was;
 - ``restart``: a run from scratch with the corrected spec of the same seed, budget B.
 
@@ -179,7 +179,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--unlink-held", action="store_true",
                    help="also remove the positive edges that hold a sub-goal in G* which most successes skipped")
     p.add_argument("--unlink-together", action="store_true",
-                   help="also remove the negative edges whose two sub-goals most recent successes both achieved")
+                   help="also remove the negative edges whose two sub-goals every recent success achieved")
     args = p.parse_args(argv)
     overrides: list[str] = list(args.overrides)
     if args.smoke:

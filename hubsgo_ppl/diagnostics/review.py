@@ -15,7 +15,7 @@ that the human can revise the spec:
   the human's positive edges keep in G* though most successes did without it, and one every success
   achieved that G* leaves out;
 - negative edges the successes contradict (:func:`negative_edges_against_successes`): two sub-goals
-  the human said exclude each other that at least half of the recent successes both achieved;
+  the human said exclude each other that every recent success achieved;
 - what the agent achieves: the frequency of each sub-goal over the filter's recent successful
   episodes (``CriticFilter.outcomes()``), and the success rate over the last K episodes of
   ``metrics.csv`` (with per-sub-goal frequencies when it has ``visited/<name>`` columns);
@@ -150,12 +150,14 @@ def prior_against_successes(top: Sequence[str], names: Sequence[str], achieved: 
 
 
 def negative_edges_against_successes(outcomes: Any, names: Sequence[str], human: Mapping[frozenset, str],
-                                     most: float = 0.5) -> list[dict[str, Any]]:
-    """The human's negative edges whose two sub-goals at least ``most`` of the recent successful
-    episodes both achieved: ``{"u", "v", "both_frequency"}`` in the order of ``names``. An edge that
-    says "one excludes the other" between two steps of the route the agent takes holds the critic's
-    coupling negative (at the outcome likelihood's default power the successes cannot flip it), so the
-    learned sign never contradicts it; the successes do. Empty without successes."""
+                                     share: float = 1.0) -> list[dict[str, Any]]:
+    """The human's negative edges whose two sub-goals at least ``share`` of the recent successful
+    episodes (by default every one) both achieved: ``{"u", "v", "both_frequency"}`` in the order of
+    ``names``. Every success, not most: an agent also passes sub-goals it does not need (a cube pushed
+    across one target on its way to another), and a pair that every success achieves is one the task
+    needs. An edge that says "one excludes the other" between two steps of the route the agent takes
+    holds the critic's coupling negative (at the outcome likelihood's default power the successes cannot
+    flip it), so the learned sign never contradicts it; the successes do. Empty without successes."""
     arr = np.asarray(outcomes.detach().cpu().numpy() if hasattr(outcomes, "detach") else outcomes, dtype=float)
     arr = arr.reshape(-1, len(names))
     if arr.shape[0] == 0:
@@ -167,7 +169,7 @@ def negative_edges_against_successes(outcomes: Any, names: Sequence[str], human:
             continue
         u, v = sorted(edge, key=index.__getitem__)
         both = float((arr[:, index[u]] * arr[:, index[v]]).mean())
-        if both >= most:
+        if both >= share:
             rows.append({"u": u, "v": v, "both_frequency": both})
     return sorted(rows, key=lambda r: (index[r["u"]], index[r["v"]]))
 
@@ -180,7 +182,7 @@ def suggested_spec(r: Mapping[str, Any], spec: Mapping[str, Any], rare: float = 
       edges (without successes, or before the critic's first update, nothing is dropped: the marginals
       are then the prior's, not evidence);
     - give each flagged edge its learned sign, and each edge left unknown with a learned sign that sign;
-    - remove each negative edge whose two sub-goals most recent successes both achieved, and each
+    - remove each negative edge whose two sub-goals every recent success achieved, and each
       positive edge that holds in G* a sub-goal most recent successes skipped.
 
     A sub-goal every success achieved that G* leaves out needs an edge only the human can choose, so
@@ -373,7 +375,7 @@ def _review(run_dir: Path, resolved: dict[str, Any], env: Any, agent: Any, thres
 
 def plot_review_graph(r: dict[str, Any], path: Path) -> Path:
     """The learned MRF (``diagnostics.plots.mrf_graph_figure``: node = P(w_i = 1), edge width = |J|,
-    colour = sign) with the flagged edges, and the negative edges whose two sub-goals most successes both
+    colour = sign) with the flagged edges, and the negative edges whose two sub-goals every recent success
     achieved, overlaid as red dashes and the suggested drops ringed in red."""
     import networkx as nx
     from matplotlib.lines import Line2D

@@ -245,18 +245,22 @@ def test_prior_against_successes_names_what_the_edges_hold_in_and_what_the_succe
     assert prior_against_successes([], names, None, human) == {"held_by_edges": [], "needed_not_in_g_star": []}
 
 
-def test_negative_edges_whose_ends_most_successes_both_achieve_are_named():
+def test_negative_edges_whose_ends_every_success_achieves_are_named():
     names = ["a", "b", "c", "d"]
-    human = {frozenset(("a", "b")): "negative", frozenset(("c", "b")): "negative",
-             frozenset(("a", "d")): "positive", frozenset(("c", "d")): "unknown", frozenset(("a", "zz")): "negative"}
+    human = {frozenset(("a", "b")): "negative", frozenset(("c", "b")): "negative", frozenset(("a", "d")): "negative",
+             frozenset(("b", "d")): "positive", frozenset(("c", "d")): "unknown", frozenset(("a", "zz")): "negative"}
     wins = np.array([[1, 1, 1, 1], [1, 1, 0, 1], [1, 0, 1, 1], [0, 1, 0, 1]])
-    # a and b: 2 of 4 successes (named, at half); b and c: 1 of 4 (not); the positive and unknown edges
-    # are never named, however often both ends hold; an edge to a sub-goal not in the run is ignored
-    assert negative_edges_against_successes(wins, names, human) == [{"u": "a", "v": "b", "both_frequency": 0.5}]
-    assert negative_edges_against_successes(wins, names, human, most=0.75) == []
-    human[frozenset(("c", "b"))] = "negative"
+    # a and d: 3 of 4 successes, a and b: 2 of 4, b and c: 1 of 4: by default only an edge whose two ends
+    # every success achieved is named, and none is here; the positive and unknown edges are never named,
+    # however often both ends hold; an edge to a sub-goal not in the run is ignored
+    assert negative_edges_against_successes(wins, names, human) == []
+    assert negative_edges_against_successes(wins, names, human, share=0.75) == [
+        {"u": "a", "v": "d", "both_frequency": 0.75}]
+    assert negative_edges_against_successes(wins, names, human, share=0.5) == [
+        {"u": "a", "v": "b", "both_frequency": 0.5}, {"u": "a", "v": "d", "both_frequency": 0.75}]
     assert negative_edges_against_successes(torch.tensor(wins[:1], dtype=torch.float32), names, human) == [
-        {"u": "a", "v": "b", "both_frequency": 1.0}, {"u": "b", "v": "c", "both_frequency": 1.0}]
+        {"u": "a", "v": "b", "both_frequency": 1.0}, {"u": "a", "v": "d", "both_frequency": 1.0},
+        {"u": "b", "v": "c", "both_frequency": 1.0}]
     assert negative_edges_against_successes(np.zeros((0, 4)), names, human) == []
 
 
@@ -264,22 +268,21 @@ def test_review_names_a_negative_edge_between_two_subgoals_the_successes_both_ac
     run2 = _copy(run, tmp_path / "together")
     _edit_critic(run2)
     names = list(load_run(run2)[2].filter.critic.names)
-    # the spec says the keys exclude each other (yellow_key -- blue_key negative), and 3 of 4 recent
+    # the spec says the keys exclude each other (yellow_key -- blue_key negative), and all 4 recent
     # successes held both keys at some step
-    wins = [[1 if n in ("yellow_door", "goal") or (n == "blue_key" and k < 3) or n == "yellow_key" else 0
-             for n in names] for k in range(4)]
+    wins = [[1 if n in ("yellow_key", "blue_key", "yellow_door", "goal") else 0 for n in names] for k in range(4)]
     _edit_critic(run2, outcomes=wins)
     r = review(run2, threshold=0.2, gif=False)
     assert r["negative_edges_achieved_together"] == [
         {"u": min(("yellow_key", "blue_key"), key=names.index), "v": max(("yellow_key", "blue_key"), key=names.index),
-         "both_frequency": 0.75}]
+         "both_frequency": 1.0}]
     md = (run2 / "review" / "review.md").read_text()
     c = r["negative_edges_achieved_together"][0]
-    assert (f"**edge {c['u']} — {c['v']}**: you said *negative* (one excludes the other), yet 75% of the recent "
+    assert (f"**edge {c['u']} — {c['v']}**: you said *negative* (one excludes the other), yet 100% of the recent "
             "successes achieved both; remove it, or make it positive if the route needs both") in md
     assert f"| {c['u']} — {c['v']} | negative |" in md and "**the successes achieve both**" in md
     assert main(["review", str(run2), "--no-gif", "--out", str(tmp_path / "cli")]) == 0
-    assert f"both ends achieved by most successes: {c['u']}--{c['v']} (75%)" in capsys.readouterr().out
+    assert f"both ends achieved by every recent success: {c['u']}--{c['v']} (100%)" in capsys.readouterr().out
     # the suggested spec leaves that edge out, and a revision takes it as it is
     import yaml
 
@@ -292,8 +295,8 @@ def test_review_names_a_negative_edge_between_two_subgoals_the_successes_both_ac
     assert f"hubsgo revise {run2} --model {path}" in md
     record = revise(run2, path, steps=2000, train_after=False)["revision"]
     assert {"yellow_key--blue_key", "blue_key--yellow_key"} & set(record["edges_dropped"])
-    # one success of four holding both keys: nothing is named
-    _edit_critic(run2, outcomes=[[1 if n in ("yellow_key", "yellow_door", "goal") or (n == "blue_key" and k == 0)
+    # three successes of four holding both keys: nothing is named
+    _edit_critic(run2, outcomes=[[1 if n in ("yellow_key", "yellow_door", "goal") or (n == "blue_key" and k < 3)
                                   else 0 for n in names] for k in range(4)])
     assert review(run2, threshold=0.2, gif=False)["negative_edges_achieved_together"] == []
 
