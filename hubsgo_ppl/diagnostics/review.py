@@ -149,6 +149,13 @@ def prior_against_successes(top: Sequence[str], names: Sequence[str], achieved: 
     return out
 
 
+def _outcome_array(outcomes: Any, n: int) -> np.ndarray:
+    """The filter's recent successful episodes (a tensor or array) as a float array, one row of ``n``
+    achieved flags per episode."""
+    return np.asarray(outcomes.detach().cpu().numpy() if hasattr(outcomes, "detach") else outcomes,
+                      dtype=float).reshape(-1, n)
+
+
 def negative_edges_against_successes(outcomes: Any, names: Sequence[str], human: Mapping[frozenset, str],
                                      share: float = 1.0) -> list[dict[str, Any]]:
     """The human's negative edges whose two sub-goals at least ``share`` of the recent successful
@@ -158,8 +165,7 @@ def negative_edges_against_successes(outcomes: Any, names: Sequence[str], human:
     needs. An edge that says "one excludes the other" between two steps of the route the agent takes
     holds the critic's coupling negative (at the outcome likelihood's default power the successes cannot
     flip it), so the learned sign never contradicts it; the successes do. Empty without successes."""
-    arr = np.asarray(outcomes.detach().cpu().numpy() if hasattr(outcomes, "detach") else outcomes, dtype=float)
-    arr = arr.reshape(-1, len(names))
+    arr = _outcome_array(outcomes, len(names))
     if arr.shape[0] == 0:
         return []
     index = {n: i for i, n in enumerate(names)}
@@ -246,8 +252,7 @@ def marginal_trend(marginals: Mapping[str, float], baseline: dict[str, Any] | No
 
 def achieved_frequencies(outcomes: Any, names: list[str]) -> dict[str, Any]:
     """Per sub-goal, the share of the filter's recent successful episodes that achieved it."""
-    arr = np.asarray(outcomes.detach().cpu().numpy() if hasattr(outcomes, "detach") else outcomes, dtype=float)
-    arr = arr.reshape(-1, len(names))
+    arr = _outcome_array(outcomes, len(names))
     if arr.shape[0] == 0:
         return {"episodes": 0, "frequency": None}
     return {"episodes": int(arr.shape[0]), "frequency": dict(zip(names, arr.mean(0).tolist()))}
@@ -318,7 +323,8 @@ def _review(run_dir: Path, resolved: dict[str, Any], env: Any, agent: Any, thres
     couplings = compare_couplings(factors["pairwise"], human, dead_band)
     spec_only = [{"u": u, "v": v, "human": s} for u, v, s in (resolved.get("model_spec") or {}).get("edges", [])
                  if frozenset((u, v)) not in {frozenset(e) for e in factors["pairwise"]}]
-    achieved = achieved_frequencies(agent.filter.outcomes(), names)
+    outcomes = agent.filter.outcomes()
+    achieved = achieved_frequencies(outcomes, names)
     baseline = _previous_review(out / "review.json", names) or _first_history_row(run_dir / "critic_history.csv", names)
 
     result: dict[str, Any] = {
@@ -344,7 +350,7 @@ def _review(run_dir: Path, resolved: dict[str, Any], env: Any, agent: Any, thres
         "spec_edges_not_in_graph": spec_only,
         "suggested_drops": suggested_drops(marginals, threshold, achieved["frequency"]),
         **prior_against_successes(ranking[0]["subgoals"], names, achieved["frequency"], human),
-        "negative_edges_achieved_together": negative_edges_against_successes(agent.filter.outcomes(), names, human),
+        "negative_edges_achieved_together": negative_edges_against_successes(outcomes, names, human),
         "achieved": {"recent_successes": achieved, "metrics": metrics_summary(run_dir / "metrics.csv", names, last)},
         "episode": None,
         "review_dir": str(out),
