@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import os
 import sys
 
 import numpy as np
@@ -114,9 +115,13 @@ def cmd_revise(args: argparse.Namespace) -> int:
           f"re-signed: {_names(r['edges_resigned'])}; graph {r['graph']}, prior {r['prior']}, "
           f"likelihood {r['likelihood']}, inference {r['inference']}")
     k = r["kept"]
-    print(f"  carried over by name: {k['theta']} unary factors, {k['couplings']} couplings, {k['high_outputs']} "
-          f"high-level outputs; new: {_names(r['new']['subgoals'] + r['new']['edges'])}; the critic's optimiser "
-          f"restarts")
+    if r.get("critic_learned", True):
+        print(f"  carried over by name: {k['theta']} unary factors, {k['couplings']} couplings, {k['high_outputs']} "
+              f"high-level outputs; new: {_names(r['new']['subgoals'] + r['new']['edges'])}; the critic's optimiser "
+              f"restarts")
+    else:
+        print(f"  the critic had not updated yet, so it starts as the revised spec says (every factor from its prior "
+              f"and signs); carried over by name: {k['high_outputs']} high-level outputs")
     print(f"  recorded in {run_dir / 'revisions' / format(r['revision'], '03d')} and {run_dir / 'revisions.csv'}")
     if args.no_train:
         print(f"continue with: hubsgo train {_run_task(run_dir)} --out {run_dir} --resume")
@@ -147,11 +152,13 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def cmd_subgoals(args: argparse.Namespace) -> int:
-    from .experiments.run import RunError, load_run, subgoal_table
+    from .experiments.run import G_STAR_SAMPLES, RunError, load_run, subgoal_table
 
     run_dir = Path(args.run_dir)
+    if args.samples is not None and args.samples < 1:
+        raise RunError(f"--samples must be a positive number of critic samples, got {args.samples}")
     path = run_dir / "subgoals.json"
-    if path.exists() and not args.recompute:
+    if path.exists() and not args.recompute and args.samples is None:    # --samples N asks for a new readout
         table = json.loads(path.read_text())
     else:
         resolved, env, agent, _ = load_run(run_dir)
@@ -159,7 +166,8 @@ def cmd_subgoals(args: argparse.Namespace) -> int:
             if not (hasattr(agent, "filter") and hasattr(agent.filter, "critic")):
                 raise RunError(f"{run_dir}: agent {resolved['agent']!r} has no sub-goal critic; "
                                "train with --agent hubsgo to learn sub-goal sets")
-            table = subgoal_table(agent.g_star_critic(), list(env.unwrapped.subgoal_names), args.samples)
+            table = subgoal_table(agent.g_star_critic(), list(env.unwrapped.subgoal_names),
+                                  G_STAR_SAMPLES if args.samples is None else args.samples)
     print(_fmt_ranking(table))
     return 0
 
@@ -341,7 +349,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("subgoals", help="print the learned sub-goal sets G* of a HUBS-GO run")
     s.add_argument("run_dir")
-    s.add_argument("--samples", type=int, default=10_000)
+    s.add_argument("--samples", type=int, metavar="N",
+                   help="recompute G* from the checkpoint with N critic samples (default: the run's subgoals.json, "
+                        "else 10,000)")
     s.add_argument("--recompute", action="store_true", help="recompute from the checkpoint")
     s.set_defaults(func=cmd_subgoals)
 
@@ -412,6 +422,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     try:
         return int(args.func(args) or 0)
+    except BrokenPipeError:     # the reader went away (`hubsgo ... | head`): stop quietly, as Unix tools do
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())       # no second error when Python flushes stdout at exit
+        return 1
     except (SpecError, RunError, CheckpointError, UnknownTaskError, FloatingPointError) as exc:
         msg = str(exc).strip().replace("\n", "; ")
         print(f"hubsgo: error: {msg}", file=sys.stderr)

@@ -39,6 +39,15 @@ def test_train_subgoals_evaluate_round_trip(tmp_path, capsys):
     assert main(["subgoals", str(run)]) == 0
     table = capsys.readouterr().out
     assert "rank" in table and "marginals P(w=1)" in table
+    assert main(["subgoals", str(run), "--samples", "50"]) == 0         # a number of samples asks for a new readout
+    assert capsys.readouterr().out.startswith("G* from 50 critic samples")
+    assert main(["subgoals", str(run), "--samples", "0", "--recompute"]) == 2
+    assert "--samples must be a positive number" in _one_error_line(capsys)
+    # a reader that goes away (`| head -1`) ends the command quietly, with no traceback
+    piped = subprocess.run(f"{sys.executable} -m hubsgo_ppl.cli subgoals {run} | head -1", shell=True,
+                           capture_output=True, text=True)
+    assert piped.stdout.startswith("G* from 10,000") and len(piped.stdout.splitlines()) == 1
+    assert piped.stderr == ""
     assert main(["evaluate", str(run), "--episodes", "2"]) == 0
     assert "greedy return" in capsys.readouterr().out
     assert json.loads((run / "eval.json").read_text())["break_cycles"] is True
@@ -258,6 +267,14 @@ def test_a_spec_that_leaves_the_goal_unlinked_gets_a_note_and_the_shipped_one_do
     assert "hubsgo: note" not in capsys.readouterr().err
     assert main(["train", "keydoor", "--out", str(tmp_path / "c"), "--steps", "100", "--no-progress", *TINY]) == 0
     assert "hubsgo: note" not in capsys.readouterr().err
+    # a revision to such a spec gets the same note
+    spec.write_text(spec.read_text().replace("likelihood: {name: outcome, power: 1.0}\n", ""))
+    run = tmp_path / "d"
+    assert main(["train", "keydoor", "--out", str(run), "--steps", "300", "--stop-at", "100", "--no-progress",
+                 *TINY]) == 0
+    capsys.readouterr()
+    assert main(["revise", str(run), "--model", str(spec), "--no-train"]) == 0
+    assert "hubsgo: note: model spec 'keys-only' gives goal (the task's goal) no positive edge" in capsys.readouterr().err
 
 
 def test_missing_robosuite_names_the_extra(monkeypatch, capsys, tmp_path):

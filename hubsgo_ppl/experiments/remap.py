@@ -6,7 +6,9 @@ same unordered pair of names):
 
 - critic: the unary factor ``theta`` of every persisting sub-goal and the coupling of every
   persisting edge are copied bit for bit, whatever the edge's sign is now (a sign seeds initial
-  values only; a prior built from the signs changes with them). A new sub-goal's theta starts where
+  values only; a prior built from the signs changes with them). A critic that has never updated has
+  learned nothing: its factors are its starting values, so every factor starts as a fresh critic of
+  the new spec starts it (a re-signed edge from its new sign). A new sub-goal's theta starts where
   the prior puts it: the prior's natural parameter when the prior is a pairwise MRF on the graph
   (``bernoulli``: logit p, ``ising``: its field), else 0. A new edge starts as a fresh critic of the
   new spec starts it: the prior's coupling with ``inference.init: prior``, else ``init_scale`` times
@@ -170,9 +172,10 @@ def remap_critic_state(old: dict[str, Any], fresh_critic: Any, keep_run: bool = 
     index = name_index(old_names, new_names)
     natural = fresh_critic.prior.natural_params()
     theta0 = natural[0].float() if natural is not None else torch.zeros(len(new_names))
+    learned = int(old.get("num_updates", 1)) > 0    # a critic never updated holds its starting values only
     theta = fresh["theta"].clone()
     for j, i in enumerate(index):
-        theta[j] = old["theta"][i] if i is not None else theta0[j]
+        theta[j] = old["theta"][i] if i is not None and learned else theta0[j]
     old_edges = {frozenset((u, v)): (k, int(s)) for k, (u, v, s) in enumerate(old["edges"])}
     coupling = fresh["coupling"].clone()
     kept_edges, new_edges, resigned = [], [], []
@@ -181,10 +184,13 @@ def remap_critic_state(old: dict[str, Any], fresh_critic: Any, keep_run: bool = 
         if hit is None:
             new_edges.append(f"{u}--{v}")
             continue
-        coupling[k] = old["coupling"][hit[0]]
-        kept_edges.append(f"{u}--{v}")
         if hit[1] != int(s):
             resigned.append(f"{u}--{v}")
+        if not learned:             # the fresh critic's start, under the new sign and prior
+            new_edges.append(f"{u}--{v}")
+            continue
+        coupling[k] = old["coupling"][hit[0]]
+        kept_edges.append(f"{u}--{v}")
     ends = {frozenset((u, v)) for u, v, _ in fresh["edges"]}
     dropped_edges = [f"{u}--{v}" for u, v, _ in old["edges"] if frozenset((u, v)) not in ends]
 
@@ -207,11 +213,11 @@ def remap_critic_state(old: dict[str, Any], fresh_critic: Any, keep_run: bool = 
     state["baseline"] = {}
     if keep_run:
         state["rng"], state["num_updates"] = old["rng"], int(old["num_updates"])
-    info = {"subgoals_kept": [n for n, i in zip(new_names, index) if i is not None],
-            "subgoals_new": [n for n, i in zip(new_names, index) if i is None],
+    info = {"subgoals_kept": [n for n, i in zip(new_names, index) if i is not None and learned],
+            "subgoals_new": [n for n, i in zip(new_names, index) if i is None or not learned],
             "subgoals_dropped": [n for n in old_names if n not in new_names],
             "edges_kept": kept_edges, "edges_new": new_edges, "edges_dropped": dropped_edges,
-            "edges_resigned": resigned}
+            "edges_resigned": resigned, "learned": learned}
     return state, info
 
 
@@ -345,7 +351,7 @@ def revise_agent_state(old: dict[str, Any], agent: Any,
     if mask is not None:
         mask = torch.as_tensor(_remap_columns(np.asarray(mask, dtype=bool)[None], index, True)[0])
     outcomes = old["filter"].get("outcomes", torch.zeros(0, len(old_names)))
-    if info["subgoals_new"]:
+    if any(i is None for i in index):       # stored episodes do not say whether they achieved a new sub-goal
         outcomes = torch.zeros(0, len(new_names))
     else:
         outcomes = torch.as_tensor(_remap_columns(np.asarray(outcomes.numpy(), dtype=np.float32), index, False))

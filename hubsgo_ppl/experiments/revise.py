@@ -56,7 +56,7 @@ from ..envs import get_task
 from ..envs.subset import catalogue_order, check_subset
 from .io import truncate_csv, write_json, write_text, write_yaml
 from .run import (CHECKPOINT, EPISODE_LOGS, REVISIONS_CSV, RunConfig, RunError, _build, _run_checkpoint, _save,
-                  plot_run_curve, train, warn_goals_left_out)
+                  note_unlinked_goals, plot_run_curve, train, warn_goals_left_out)
 from .remap import TransferError, revise_agent_state
 
 __all__ = ["revise", "apply_revision", "load_revision_spec", "spec_changes", "objective_unchanged", "REVISIONS_DIR", "REVISION_FIELDS"]
@@ -164,6 +164,7 @@ def apply_revision(run_dir: str | Path, new_spec: str | Path, steps: int | None 
 
     changes = spec_changes(old["model_spec"], new["model_spec"])
     warn_goals_left_out(spec.name, old["task_ref"], new.get("subgoals"))
+    note_unlinked_goals(new)
     env, agent = _build(new)
     with contextlib.closing(env):
         try:
@@ -177,7 +178,7 @@ def apply_revision(run_dir: str | Path, new_spec: str | Path, steps: int | None 
                   "kept": {"theta": len(kept["subgoals_kept"]), "couplings": len(kept["edges_kept"]),
                            "high_outputs": kept["high_outputs_kept"]},
                   "new": {"subgoals": kept["subgoals_new"], "edges": kept["edges_new"]},
-                  "critic_optimizer": kept["critic_optimizer"], "pending_discarded": kept["pending_discarded"],
+                  "critic_learned": kept["learned"], "critic_optimizer": kept["critic_optimizer"], "pending_discarded": kept["pending_discarded"],
                   "outcomes_kept": kept["outcomes_kept"]}
         folder = run_dir / REVISIONS_DIR / f"{number:03d}"
         write_yaml(folder / "spec_before.yaml", old["model_spec"])

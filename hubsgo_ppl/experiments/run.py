@@ -184,6 +184,15 @@ def _unlinked_goals(resolved: dict[str, Any]) -> list[str]:
     return [g for g in _task_goals(resolved["task_ref"]) if g in spec["subgoals"] and g not in linked]
 
 
+def note_unlinked_goals(resolved: dict[str, Any]) -> None:
+    """A one-line note on stderr for each run (new or revised) whose spec leaves the goal unlinked."""
+    unlinked = _unlinked_goals(resolved)
+    if unlinked:
+        print(f"hubsgo: note: model spec {resolved['model']!r} gives {', '.join(unlinked)} (the task's goal) no "
+              "positive edge, so its prior's field keeps it out of G*; link the last sub-goal of each route "
+              "to it (e.g. [a_door, goal, positive])", file=sys.stderr)
+
+
 def _build(resolved: dict[str, Any]):
     register()
     # built-in name or catalogue path; with a ``subgoals`` subset, the task with only those sub-goals
@@ -319,11 +328,7 @@ def _start(cfg: RunConfig, out: Path, resume: bool):
         elif never:
             print(f"hubsgo: warning: {cfg.task}: no state the agent can reach achieves {', '.join(never)}; "
                   "check the layout (a key behind its own door, a walled-in cell)", file=sys.stderr)
-    unlinked = _unlinked_goals(resolved)
-    if unlinked:
-        print(f"hubsgo: note: model spec {resolved['model']!r} gives {', '.join(unlinked)} (the task's goal) no "
-              "positive edge, so its prior's field keeps it out of G*; link the last sub-goal of each route "
-              "to it (e.g. [a_door, goal, positive])", file=sys.stderr)
+    note_unlinked_goals(resolved)
     plan = None
     if cfg.init_from is not None:       # every refusal before anything is written
         from .transfer import TransferError, plan_transfer

@@ -266,3 +266,27 @@ def test_a_revision_keeps_a_high_level_over_rows_whole_and_renumbers_its_buffer_
     np.testing.assert_array_equal(np.asarray(new["available"][:len(rows)]), np.asarray(old["available"][rows][:, kept]))
     train(RunConfig(task="keydoor_incorrect"), run, resume=True, progress=False)
     assert load_checkpoint(run / "checkpoint.pt")["env_steps"] >= STEPS
+
+
+def test_a_critic_that_never_updated_starts_the_revised_spec_afresh_so_a_re_signed_edge_takes_its_new_sign(tmp_path):
+    # the outcome likelihood learns from successes only: paused after one episode, the critic has not updated
+    spec = _spec(tmp_path / "first.yaml", "first", FIVE, EDGES, likelihood={"name": "outcome"})
+    run = tmp_path / "run"
+    train(RunConfig(task="keydoor_incorrect", model=str(spec), steps=STEPS, seed=1, overrides=TINY), run,
+          progress=False, stop_at=1)
+    critic = load_checkpoint(run / "checkpoint.pt")["agent"]["filter"]["critic"]
+    assert critic["num_updates"] == 0
+    assert _edges(critic)[frozenset(("yellow_door", "blue_door"))] == -3.0
+
+    resigned = [e if e[:2] != ["yellow_door", "blue_door"] else ["yellow_door", "blue_door", "positive"] for e in EDGES]
+    spec2 = tmp_path / "second.yaml"
+    spec2.write_text(yaml.safe_dump({**yaml.safe_load(spec.read_text()), "name": "second", "edges": resigned,
+                                     "prior": {"name": "ising", "strength": 2.0, "field": -1.0}}))
+    record = apply_revision(run, spec2)
+    assert record["edges_resigned"] == ["yellow_door--blue_door:negative->positive"]
+    assert record["critic_learned"] is False and record["kept"]["theta"] == record["kept"]["couplings"] == 0
+    after = load_checkpoint(run / "checkpoint.pt")["agent"]["filter"]["critic"]
+    couplings = _edges(after)
+    assert couplings[frozenset(("yellow_door", "blue_door"))] == 2.0       # the new prior's strength x the new sign
+    assert couplings[frozenset(("yellow_key", "blue_key"))] == -2.0
+    assert torch.equal(after["theta"], torch.full((5,), -1.0))              # the new prior's field
