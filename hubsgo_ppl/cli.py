@@ -47,16 +47,20 @@ def _fmt_ranking(table: dict[str, Any]) -> str:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    from .experiments.run import RunConfig, train
+    from .experiments.run import RunConfig, check_resume, train
 
-    out = Path(args.out) if args.out else Path("runs") / f"{args.task}-{args.agent}-s{args.seed}"
+    agent, seed = args.agent or "hubsgo", 0 if args.seed is None else args.seed
+    out = Path(args.out) if args.out else Path("runs") / f"{args.task}-{agent}-s{seed}"
+    if args.resume:     # flags given that would change the run are refused; the run's own values pass
+        check_resume(out, args.task, agent=args.agent, seed=args.seed, model=args.model, graph=args.graph,
+                     low_level=args.low_level, overrides=args.set or [], init_from=args.init_from)
     if (args.transfer is not None or args.restart_schedules) and args.init_from is None:
         from .experiments.run import RunError
 
         flag = "--transfer names what to take" if args.transfer is not None else "--restart-schedules is about what is taken"
         raise RunError(f"{flag} from the run given by --init-from; add --init-from RUN")
-    cfg = RunConfig(task=args.task, agent=args.agent, model=args.model, graph=args.graph, steps=args.steps,
-                    seed=args.seed, low_level=args.low_level, overrides=args.set or [], init_from=args.init_from,
+    cfg = RunConfig(task=args.task, agent=agent, model=args.model, graph=args.graph, steps=args.steps,
+                    seed=seed, low_level=args.low_level, overrides=args.set or [], init_from=args.init_from,
                     transfer=args.transfer.split(",") if args.transfer is not None else None,
                     restart_schedules=args.restart_schedules, checkpoint_steps=args.checkpoint_steps)
     summary = train(cfg, out, resume=args.resume, progress=not args.no_progress, stop_at=args.stop_at)
@@ -301,12 +305,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     t = sub.add_parser("train", help="train an agent on a task and write a run directory")
     t.add_argument("task", help="task name (see `hubsgo tasks`) or a catalogue .yaml")
-    t.add_argument("--agent", default="hubsgo", choices=agent_names())
+    t.add_argument("--agent", choices=agent_names(), help="default hubsgo")
     t.add_argument("--model", help="critic spec: a built-in name (e.g. keydoor-specific) or a .yaml path")
     t.add_argument("--graph", choices=["specific", "fully_connected", "independent"],
                    help="override the spec's graph preset")
     t.add_argument("--steps", type=int, help="environment-step budget (default: per task family)")
-    t.add_argument("--seed", type=int, default=0)
+    t.add_argument("--seed", type=int, help="default 0")
     t.add_argument("--out", help="run directory (default runs/TASK-AGENT-sSEED)")
     t.add_argument("--resume", action="store_true", help="continue the run in --out from its checkpoint")
     t.add_argument("--low-level", choices=["learned", "scripted"], help="low level (default: per family)")

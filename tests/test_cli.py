@@ -7,6 +7,7 @@ import subprocess
 import sys
 
 import pytest
+import torch
 import yaml
 
 from hubsgo_ppl.cli import main
@@ -407,3 +408,28 @@ def test_train_checkpoints_every_checkpoint_steps_and_a_resumed_run_keeps_its_ow
     assert 200 <= paused < 400
     assert main([*args, "--resume"]) == 0          # the default would be 5,000; the run keeps 150
     assert yaml.safe_load((out / "config.yaml").read_text())["checkpoint_steps"] == 150
+
+
+def test_resume_refuses_flags_that_would_change_the_run_and_keeps_config_yaml_with_the_checkpoint(tmp_path, capsys):
+    run = tmp_path / "run"
+    start = ["train", "keydoor", "--seed", "3", "--steps", "600", "--out", str(run), "--no-progress", *TINY]
+    assert main([*start, "--stop-at", "200"]) == 0
+    capsys.readouterr()
+    for flags, needle in ((["--seed", "4"], "--seed 4 (the run's is 3)"),
+                          (["--agent", "hdqn"], "--agent hdqn (the run's is hubsgo)"),
+                          (["--set", "high.lr=0.5"], "--set high.lr=0.5 (the run's is 0.001)"),
+                          (["--model", "keydoor-fully_connected"], "--model keydoor-fully_connected"),
+                          (["--graph", "independent"], "--graph independent (the run's is specific"),
+                          (["--steps", "100"], "the run has already taken")):
+        assert main(["train", "keydoor", "--out", str(run), "--resume", "--no-progress", *flags]) == 2, flags
+        assert needle in _one_error_line(capsys)
+    assert main(["train", "fourroom", "--out", str(run), "--resume", "--no-progress"]) == 2
+    assert "task fourroom (the run's is keydoor)" in _one_error_line(capsys)
+    # the command that started the run, repeated with --resume, continues it to a longer budget
+    assert main([*start[:5], "900", *start[6:], "--resume"]) == 0
+    ckpt = torch.load(run / "checkpoint.pt", weights_only=False)
+    assert ckpt["env_steps"] >= 900 and ckpt["config"]["hyper"]["steps"] == 900
+    assert yaml.safe_load((run / "config.yaml").read_text())["hyper"]["steps"] == 900
+    capsys.readouterr()
+    assert main(["train", "keydoor", "--out", str(run), "--resume", "--no-progress"]) == 0    # nothing left to train
+    assert "has finished its budget of 900 env steps; nothing to train" in capsys.readouterr().err

@@ -34,7 +34,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import numpy as np
 import torch
@@ -299,6 +299,60 @@ def subgoal_table(critic: Any, names: list[str], num_samples: int = G_STAR_SAMPL
                         "pairwise": {f"{u}--{v}": j for (u, v), j in critic.factors()["pairwise"].items()}}}
 
 
+def _at(tree: dict[str, Any], path: list[str]) -> Any:
+    for key in path:
+        if not isinstance(tree, dict) or key not in tree:
+            return None
+        tree = tree[key]
+    return tree
+
+
+def check_resume(out: str | Path, task: str, *, agent: str | None = None, seed: int | None = None,
+                 model: str | None = None, graph: str | None = None, low_level: str | None = None,
+                 overrides: Sequence[str] = (), init_from: str | None = None) -> None:
+    """Refuse (one line) a ``--resume`` whose other flags would change the run in ``out``: a resumed run
+    continues as its checkpoint's config says. Flags equal to the run's own pass, so the command that
+    started a run can be repeated with ``--resume``; a flag left out (None) is not compared."""
+    out = Path(out)
+    if not (out / CHECKPOINT).exists():
+        return
+    run = _run_checkpoint(out / CHECKPOINT)["config"]
+    clash = []
+    if task not in (run["task"], run["task_ref"]) and task_ref(task) != run["task_ref"]:
+        clash.append(f"task {task} (the run's is {run['task_ref']})")
+    if agent is not None and agent != run["agent"]:
+        clash.append(f"--agent {agent} (the run's is {run['agent']})")
+    if seed is not None and int(seed) != int(run["seed"]):
+        clash.append(f"--seed {seed} (the run's is {run['seed']})")
+    if low_level is not None and low_level != run["hyper"].get("low_level"):
+        clash.append(f"--low-level {low_level} (the run's is {run['hyper'].get('low_level')})")
+    ours = run.get("model_spec") or {}
+    if model is not None:
+        theirs = resolve(RunConfig(task=run["task_ref"], agent="hubsgo", model=model, graph=graph))["model_spec"]
+        if theirs != ours:
+            clash.append(f"--model {model} (the run's spec is {run.get('model')!r}; revise it with `hubsgo revise`)")
+    elif graph is not None and graph != ours.get("graph"):
+        clash.append(f"--graph {graph} (the run's is {ours.get('graph')}; revise the spec with `hubsgo revise`)")
+    if overrides:
+        info = get_task(run["task_ref"])
+        try:
+            hyper = resolve_hyper(info.family, info.name, run["agent"], list(overrides), steps=run["hyper"]["steps"],
+                                  low_level=run["hyper"].get("low_level"))
+        except ValueError as exc:
+            raise RunError(str(exc)) from None
+        for item in overrides:
+            path = item.split("=", 1)[0].strip().split(".")
+            if _at(hyper, path) != _at(run["hyper"], path):
+                clash.append(f"--set {item} (the run's is {_at(run['hyper'], path)!r})")
+    if init_from is not None:
+        source = (run.get("init_from") or {}).get("run")
+        if source is None or Path(source).resolve() != Path(init_from).resolve():
+            clash.append(f"--init-from {init_from} (the run {'started from ' + source if source else 'started afresh'})")
+    if clash:
+        raise RunError(f"{out}: --resume continues the run as its checkpoint records it, and "
+                       f"{'; '.join(clash)} would change it; drop those flags, or choose another --out for a new run")
+
+
 def _start(cfg: RunConfig, out: Path, resume: bool):
     """(resolved config, env, agent, wall time so far, TensorBoard purge step) of a new or resumed run.
 
@@ -312,7 +366,17 @@ def _start(cfg: RunConfig, out: Path, resume: bool):
         _tidy(out, ())
         for name in EPISODE_LOGS:
             truncate_csv(out / name, "episode", int(ckpt["episodes"]))
+        done, budget = int(ckpt["env_steps"]), int(ckpt["config"]["hyper"]["steps"])
+        if cfg.steps is not None and int(cfg.steps) != budget:
+            if int(cfg.steps) <= done:
+                raise RunError(f"{out}: the run has already taken {done:,} env steps; pass --steps above {done} "
+                               f"to train on (its budget is {budget:,})")
+        elif done >= budget:
+            print(f"hubsgo: {out} has finished its budget of {budget:,} env steps; nothing to train (pass --steps "
+                  f"above {done} to train on)", file=sys.stderr)
         env, agent = _restore(ckpt_path, ckpt, cfg.steps)
+        if cfg.steps is not None and int(cfg.steps) != budget:      # config.yaml says what the checkpoint says
+            write_yaml(out / "config.yaml", ckpt["config"])
         # TensorBoard hides the interrupted writer's events after the checkpoint's last episode
         return ckpt["config"], env, agent, float(ckpt.get("wall_time", 0.0)), agent.env_steps + 1
     if ckpt_path.exists():
@@ -445,7 +509,7 @@ def train(cfg: RunConfig, out: str | Path, resume: bool = False, progress: bool 
                     bar.set_postfix(post, refresh=False)
         except KeyboardInterrupt:
             raise RunError(f"interrupted; {out / CHECKPOINT} holds the last checkpoint; "
-                           f"continue with `hubsgo train {resolved['task']} --out {out} --resume`") from None
+                           f"continue with `hubsgo train {resolved['task_ref']} --out {out} --resume`") from None
         wall = wall0 + time.perf_counter() - t0
         _save(out, resolved, agent, wall)
         plot_run_curve(out, resolved)
