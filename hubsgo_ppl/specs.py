@@ -2,13 +2,14 @@
 
 Every spec error is a :class:`SpecError` whose message names the file, the key and a fix, e.g.::
 
-    models/keydoor.yaml: edges[2]: 'blue_dor' is not a sub-goal; use one of: yellow_key, ...
+    models/keydoor.yaml: edges[2]: 'blue_dor' is not in subgoals; subgoals lists 'blue_door': correct ...
 
 Specs are strict (unknown keys are errors), following Pyro's habit of rejecting unrecognised options.
 """
 
 from __future__ import annotations
 
+import difflib
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -47,7 +48,11 @@ def format_validation_error(source: str, err: ValidationError) -> str:
             msg = "unknown key; remove it or check its spelling"
         elif e["type"] == "missing":
             msg = "required key is missing; add it"
-        lines.append(f"{source}: {_loc(loc)}: {msg}")
+        elif e["type"] == "value_error":        # our own validators' words, without pydantic's prefix
+            msg = msg.removeprefix("Value error, ")
+        where = _loc(loc)
+        lines.append(f"{source}: {msg}" if where == "<top level>" and e["type"] == "value_error"
+                     else f"{source}: {where}: {msg}")
     return "\n".join(lines)
 
 
@@ -167,7 +172,11 @@ class ModelSpec(StrictModel):
         for i, (u, v, _) in enumerate(self.edges):
             for end in (u, v):
                 if end not in names:
-                    raise ValueError(f"edges[{i}]: {end!r} is not a sub-goal; use one of: {', '.join(self.subgoals)}")
+                    close = difflib.get_close_matches(end, self.subgoals, n=1)
+                    hint = (f"; subgoals lists {close[0]!r}: correct the spelling in whichever of the two is wrong"
+                            if close else "")
+                    raise ValueError(f"edges[{i}]: {end!r} is not in subgoals{hint}; use one of: "
+                                     f"{', '.join(self.subgoals)}")
             if u == v:
                 raise ValueError(f"edges[{i}]: self-edge on {u!r}; an edge joins two different sub-goals")
             if frozenset((u, v)) in pairs:

@@ -40,7 +40,9 @@ def test_valid_spec_builds_a_critic(tmp_path):
     [
         ({"sigma": 1.0}, "sigma", "unknown key; remove it"),
         ({"inference": {"lr": 0.1, "burnin": 3}}, "inference.burnin", "unknown key"),
-        ({"edges": [["a", "z", "positive"]]}, "edges[0]", "'z' is not a sub-goal; use one of: a, b, c"),
+        ({"edges": [["a", "z", "positive"]]}, "edges[0]", "'z' is not in subgoals; use one of: a, b, c"),
+        ({"subgoals": ["a", "b", "key_red"], "edges": [["a", "key_rde", "positive"]]}, "edges[0]",
+         "'key_rde' is not in subgoals; subgoals lists 'key_red': correct the spelling in whichever of the two is wrong"),
         ({"subgoals": ["a", "b", "a"], "edges": []}, "subgoals", "duplicate name 'a'"),
         ({"likelihood": {"name": "gaussian", "scale": -1.0}}, "likelihood", "scale must be > 0"),
         ({"likelihood": {"name": "gaussian", "scale": 0}}, "likelihood", "scale must be > 0"),
