@@ -100,7 +100,7 @@ def test_console_script_is_installed():
     ("loop.nonsense=3", ["unknown key 'nonsense' in section 'loop'", "valid keys:", "option_steps"]),
     ("high.lrr=0.1", ["unknown key 'lrr' in section 'high'", "batch_size", "lr"]),
     ("low.total_steps=5", ["unknown key 'total_steps' in section 'low'", "learning_starts"]),
-    ("loop.option_steps=many", ["loop.option_steps takes an integer", "'many'"]),
+    ("loop.option_steps=many", ["loop.option_steps takes an integer (default 10)", "'many'"]),   # the maze preset's
     ("high.double_q=maybe", ["high.double_q takes true or false"]),
     ("nonsense=3", ["unknown setting 'nonsense'", "sections:", "loop"]),
     ("loop=3", ["'loop' is a section"]),

@@ -238,7 +238,8 @@ def _check_item(item: str, base: dict[str, Any], hyper: dict[str, Any], models: 
     if len(parts) == 2 and parts[0] in models:
         section, name = parts
         model = models[section]
-        value = validate_section(section, model, {name: hyper[section][name]}, agent)[name]
+        value = validate_section(section, model, {name: hyper[section][name]}, agent,
+                                 defaults=base.get(section))[name]      # the preset's value is the default here
         hyper[section][name] = model(**{name: value}).model_dump(mode="json", include={name})[name]
 
 
