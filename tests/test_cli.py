@@ -211,7 +211,7 @@ def test_a_user_maze_whose_goal_cannot_be_reached_is_refused_before_a_run_starts
 
 
 def test_a_user_maze_too_large_to_search_trains_with_a_note(capsys, tmp_path, monkeypatch):
-    """Past its cap on states the reachability search checks nothing, and says so in one line."""
+    """Past its cap on states the exact search gives up; where the relaxation finds nothing wrong, one line says so."""
     from hubsgo_ppl.envs.minigrid import bfs
 
     real = bfs.check_reachable
@@ -225,8 +225,9 @@ def test_a_user_maze_too_large_to_search_trains_with_a_note(capsys, tmp_path, mo
     assert main(["train", str(tmp_path / "open.yaml"), "--model", str(tmp_path / "open-spec.yaml"),
                  "--out", str(tmp_path / "run"), "--steps", "50", "--no-progress", *TINY]) == 0
     notes = [line for line in capsys.readouterr().err.splitlines() if "too many states" in line]
-    assert notes == [f"hubsgo: note: {tmp_path / 'open.yaml'}: the maze has too many states to check before "
-                     "training that its goal and sub-goals can be reached; training without that check"]
+    assert notes == [f"hubsgo: note: {tmp_path / 'open.yaml'}: the maze has too many states to check exactly "
+                     "before training that its goal and sub-goals can be reached; a coarser check over its cells "
+                     "found nothing wrong"]
     assert (tmp_path / "run" / "metrics.csv").exists()
 
 

@@ -387,11 +387,12 @@ def _start(cfg: RunConfig, out: Path, resume: bool):
 
         never = check_reachable(resolved["task_ref"])     # a maze whose goal cannot be reached: SpecError
         if never is None:
-            print(f"hubsgo: note: {cfg.task}: the maze has too many states to check before training that its goal "
-                  "and sub-goals can be reached; training without that check", file=sys.stderr)
+            print(f"hubsgo: note: {cfg.task}: the maze has too many states to check exactly before training that its "
+                  "goal and sub-goals can be reached; a coarser check over its cells found nothing wrong",
+                  file=sys.stderr)
         elif never:
             print(f"hubsgo: warning: {cfg.task}: no state the agent can reach achieves {', '.join(never)}; "
-                  "check the layout (a key behind its own door, a walled-in cell)", file=sys.stderr)
+                  "check the layout (a key behind its own door, a walled-in cell, a cell on lava)", file=sys.stderr)
     note_unlinked_goals(resolved)
     plan = None
     if cfg.init_from is not None:       # every refusal before anything is written

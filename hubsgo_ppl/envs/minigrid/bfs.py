@@ -274,24 +274,94 @@ def shortest_path_cells(source: Any, slack: int = 0) -> set[tuple[int, int]]:
     return {s.pos for s, d in dist.items() if s in to_goal and d + to_goal[s] <= optimum + slack}
 
 
+def _relaxed(spec: MazeSpec, start: MazeState) -> tuple[bool, set[int]]:
+    """(whether the goal may be reachable, the sub-goals that hold in no reachable state) from
+    ``start``, by a relaxation of the maze over cells rather than states.
+
+    The agent walks from its cell over every cell but walls (and the objects' cells where there is no
+    ``pickup``: nothing ever moves them), ignoring the objects; lava and the goal end the walk there. It
+    holds, all at once, what it carries and every object whose cell it can face; a door is open once it
+    is open at the start, or the agent can face it with ``toggle`` and it is unlocked or a key of its
+    colour is held. This repeats until nothing changes. It is an over-approximation of
+    :func:`transition`: by induction over the actions from ``start``, every reachable state stands on a
+    cell the walk reaches (``forward`` only enters a free cell or an open door, and a door can only be
+    open as above), carries an object held here (``pickup`` takes an object from in front, from its
+    cell at the start or from where it was dropped after being held), and has only doors open that are
+    open here (a locked door opens only with its key in hand). So what it does not reach is certainly
+    unreachable. A state on lava achieves no sub-goal (its episode has ended); its objects and doors
+    are those of the state before it."""
+    lay = spec.layout
+    acts = set(spec.options.actions)
+    objects, doors = lay.carriables, lay.doors
+    door_at = {d.cell: j for j, d in enumerate(doors)}
+    blocked = set(lay.walls) if "pickup" in acts else set(lay.walls) | {c for c in start.objects if c}
+    opened = [d == 2 for d in start.doors]
+    goal = start.pos == lay.goal
+    ended = goal or start.pos in lay.lava
+    cells: set[tuple[int, int]] = set() if ended else {start.pos}   # where the agent stands, alive, not on the goal
+    faced: set[tuple[int, int]] = set()
+    while True:
+        queue = list(cells)
+        for x, y in queue:
+            for q in ((x + 1, y), (x, y + 1), (x - 1, y), (x, y - 1)):
+                faced.add(q)
+                j = door_at.get(q)
+                if "forward" not in acts or q in blocked or q in cells or (j is not None and not opened[j]):
+                    continue
+                if q == lay.goal:
+                    goal = True
+                elif q not in lay.lava:
+                    cells.add(q)
+                    queue.append(q)
+        held = [k == start.carrying or (c in faced and "pickup" in acts) for k, c in enumerate(start.objects)]
+        keys = {o.color for o, h in zip(objects, held) if h and o.type == "key"}
+        now = [was or ("toggle" in acts and d.cell in faced and (state != 0 or d.color in keys))
+               for was, d, state in zip(opened, doors, start.doors)]
+        if now == opened:
+            break
+        opened = now
+    carried = {(o.type, o.color) for o, h in zip(objects, held) if h}
+
+    def possible(p: Any) -> bool:
+        if p.kind in ("at", "goal"):
+            return p.target in cells or (goal and p.target == lay.goal)
+        if p.kind == "carrying":
+            return spec.carry_kinds[p.index] in carried
+        if p.kind == "door_open":
+            return opened[p.index]
+        return True     # a kind the relaxation does not model may hold
+
+    return goal, {i for i, p in enumerate(spec.predicates) if not possible(p)}
+
+
 def check_reachable(source: Any, max_states: int = 300_000) -> list[str] | None:
     """Check a maze before training on it: raise :class:`SpecError` (one line) if no sequence of the
     task's actions takes the agent from its start to the goal, and return the names of the catalogue's
-    sub-goals that hold in no reachable state (a key behind its own door, a cell walled in). A maze
-    with more than ``max_states`` reachable states is not checked, and gives ``None``.
+    sub-goals that hold in no reachable state (a key behind its own door, a cell walled in or on lava:
+    a state on lava achieves nothing, its episode has ended).
 
-    With a ``drop`` action a key may lie on any free cell, which multiplies the states by the cells. The
-    search therefore first leaves ``drop`` out, then allows it only to put an object back on the cell it
-    starts on (the way to swap one key for another). Every state those searches reach is reachable in
-    the task too, so where one of them reaches the goal and every sub-goal the maze passes. Only
-    otherwise does the whole search run."""
+    A cheap relaxation comes first (:func:`_relaxed`): whatever it cannot reach no state reaches, so a
+    goal out of its reach raises at once, and the sub-goals out of its reach are certainly returned.
+    Then exact searches over the states, each capped at ``max_states``. With a ``drop`` action a key may
+    lie on any free cell, which multiplies the states by the cells, so the first search leaves ``drop``
+    out, and the second allows it only to put an object back on the cell it starts on (the way to swap
+    one key for another). Every state those two reach is reachable in the task too, so where one of
+    them reaches the goal and every sub-goal but the relaxation's, the answer is exact. Otherwise (and
+    without ``drop``) the whole search runs. If it passes ``max_states`` too, the relaxation's sub-goals
+    are returned, or ``None`` where it found nothing wrong: the maze is then not checked exactly."""
     spec, starts, _ = _resolve(source, None)
     names = list(spec.subgoal_names)
     goal = spec.layout.goal
+    lava = spec.layout.lava
+    goal_possible, never = _relaxed(spec, starts[0])     # the start directions differ only in direction
+    if not goal_possible:
+        raise _unreachable(spec, starts)
     unmet = set(range(len(names)))
     reached: list[bool] = []
 
     def visit(s: MazeState) -> bool:    # every reachable state once; never "done", so the search is whole
+        if s.pos in lava:
+            return False
         unmet.difference_update([i for i in unmet if holds(spec, s, i)])
         if s.pos == goal:
             reached.append(True)
@@ -310,14 +380,23 @@ def check_reachable(source: Any, max_states: int = 300_000) -> list[str] | None:
     actions = list(spec.options.actions)
     if "drop" in actions:
         kept = [a for a in actions if a != "drop"]
-        if search(replace(spec, options=spec.options.model_copy(update={"actions": kept}))) and reached and not unmet:
-            return []
-        if search(spec, put_back=True) and reached and not unmet:
-            return []
+        if search(replace(spec, options=spec.options.model_copy(update={"actions": kept}))) and reached \
+                and unmet <= never:
+            return [names[i] for i in sorted(unmet)]
+        if search(spec, put_back=True) and reached and unmet <= never:
+            return [names[i] for i in sorted(unmet)]
     if not search(spec):
-        return None
+        return [names[i] for i in sorted(never)] or None
     if not reached:
-        raise SpecError(f"{spec.source}: the goal {goal} cannot be reached from the start "
-                        f"{starts[0].pos} with the actions {', '.join(spec.options.actions)}; check that every "
-                        f"locked door on the way has its key on the agent's side of it")
+        raise _unreachable(spec, starts)
     return [names[i] for i in sorted(unmet)]
+
+
+def _unreachable(spec: MazeSpec, starts: list[MazeState]) -> SpecError:
+    acts = spec.options.actions
+    closed = any(d != 2 for d in starts[0].doors)
+    hint = ("there is no toggle action, so no closed door can be opened; add toggle to options.actions"
+            if closed and "toggle" not in acts else
+            "check that every locked door on the way has its key on the agent's side of it")
+    return SpecError(f"{spec.source}: the goal {spec.layout.goal} cannot be reached from the start "
+                     f"{starts[0].pos} with the actions {', '.join(acts)}; {hint}")

@@ -3,6 +3,7 @@ transition model that matches MiniGrid step for step."""
 
 from __future__ import annotations
 
+import inspect
 import textwrap
 from dataclasses import replace
 
@@ -118,8 +119,12 @@ def test_check_reachable_refuses_an_unreachable_goal_and_names_unreachable_subgo
     cell = "  - {name: corner, kind: at, args: {cell: [5, 2]}}\n"
     path = _user_task(tmp_path, "#######\n#A...G#\n###.#r#\n#######\n", extra_subgoals=key + cell)
     assert bfs.check_reachable(path) == ["red_key", "corner"]
-    # past max_states nothing is checked
-    assert bfs.check_reachable(_user_task(tmp_path, "######\n#A.#G#\n######\n"), max_states=1) is None
+    # past max_states the relaxation still finds both, and still refuses the walled-off goal
+    assert bfs.check_reachable(path, max_states=1) == ["red_key", "corner"]
+    with pytest.raises(SpecError, match="cannot be reached"):
+        bfs.check_reachable(_user_task(tmp_path, "######\n#A.#G#\n######\n"), max_states=1)
+    # where it finds nothing wrong, the maze is not checked
+    assert bfs.check_reachable(_user_task(tmp_path, "######\n#A..G#\n######\n"), max_states=1) is None
 
 
 def _states(path, actions=None, put_back=False):
@@ -143,12 +148,14 @@ def test_with_a_drop_action_the_check_first_searches_without_it(tmp_path):
     assert whole > 5 * small
     assert bfs.check_reachable(path, max_states=small + 10) == []
     assert bfs.check_reachable(path, max_states=small // 2) is None
-    # a walled-in red key: the search without drop misses it, the whole one (past the cap) cannot say
+    # a walled-in red key: the search without drop misses it, and so does the relaxation, so that search
+    # answers exactly; past every cap the relaxation alone still names it
     red = "  - {name: red_key, kind: carrying, args: {type: key, color: red}}\n"
     pocket = "#########\n#A....#r#\n#..y..###\n#.......#\n######Y##\n#....G..#\n#########\n"
     walled = _user_task(tmp_path, pocket, extra_subgoals=key + red)
     small = _states(walled, ["left", "right", "forward", "pickup", "toggle", "done"])
-    assert bfs.check_reachable(walled, max_states=small + 10) is None
+    assert bfs.check_reachable(walled, max_states=small + 10) == ["red_key"]
+    assert bfs.check_reachable(walled, max_states=small // 2) == ["red_key"]
     assert bfs.check_reachable(walled) == ["red_key"]
     # here the red key blocks the corridor and must be put down behind the agent before the yellow one
     # can be picked up: only the whole search reaches the goal
@@ -157,6 +164,10 @@ def test_with_a_drop_action_the_check_first_searches_without_it(tmp_path):
     with pytest.raises(SpecError, match="cannot be reached"):
         bfs.check_reachable(_user_task(tmp_path, "########\n#Ar.yYG#\n########\n",
                                        actions="[left, right, forward, pickup, toggle]"))
+    # a closed door and no toggle action: the message says which is missing
+    with pytest.raises(SpecError, match="there is no toggle action, so no closed door can be opened"):
+        bfs.check_reachable(_user_task(tmp_path, "########\n#A.yYG.#\n########\n",
+                                       actions="[left, right, forward, pickup, drop]"))
 
 
 def test_a_maze_that_needs_one_key_swapped_for_another_object_is_checked_by_putting_it_back(tmp_path):
@@ -185,6 +196,183 @@ def test_a_maze_that_needs_one_key_swapped_for_another_object_is_checked_by_putt
                                   "chain"])
 def test_every_subgoal_of_the_shipped_mazes_is_reachable(task):
     assert bfs.check_reachable(task) == []
+    assert bfs.check_reachable(task, max_states=1) is None     # the relaxation alone finds nothing wrong
+
+
+def _forge(tmp_path, name, layout, bridge):
+    """A 15x11 maze with drop and three carriable objects: a start room, a middle room and a goal room,
+    entered by the purple key and door or by the lava bridge (sub-goal ``bridge`` at that cell) and the
+    grey door; the red key opens the red door to the goal; a yellow ball opens nothing."""
+    (tmp_path / f"{name}.txt").write_text(textwrap.dedent(layout).lstrip())
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(textwrap.dedent(f"""\
+        task: {name}
+        family: minigrid
+        options:
+          layout: {name}.txt
+          legend:
+            p: {{type: key, color: purple}}
+            P: {{type: door, color: purple, locked: true}}
+            r: {{type: key, color: red}}
+            R: {{type: door, color: red, locked: true}}
+            E: {{type: door, color: grey}}
+            o: {{type: ball, color: yellow}}
+          max_steps: 800
+          start_dir: right
+          actions: [left, right, forward, pickup, drop, toggle]
+        subgoals:
+          - {{name: purple_key, kind: carrying, args: {{type: key, color: purple}}}}
+          - {{name: purple_door, kind: door_open, args: {{color: purple}}}}
+          - {{name: bridge, kind: at, args: {{cell: {list(bridge)}}}}}
+          - {{name: grey_door, kind: door_open, args: {{color: grey}}}}
+          - {{name: red_key, kind: carrying, args: {{type: key, color: red}}}}
+          - {{name: red_door, kind: door_open, args: {{color: red}}}}
+          - {{name: ball, kind: carrying, args: {{type: ball, color: yellow}}}}
+          - {{name: goal, kind: goal}}
+        """))
+    return path
+
+
+def _passes_cap(path, max_states):
+    """Whether the whole search from the start visits more than ``max_states`` states."""
+    spec = load_maze_spec(path)
+    try:
+        bfs._bfs(spec, spec.initial_state(0), lambda s: False, max_states=max_states)
+    except RuntimeError:
+        return True
+    return False
+
+
+DEFAULT_CAP = inspect.signature(bfs.check_reachable).parameters["max_states"].default
+
+
+def test_a_maze_too_large_to_search_whose_goal_is_behind_its_own_key_is_refused(tmp_path):
+    """The red key lies behind the red door: the whole search passes the cap, and the relaxation (keys
+    and doors over cells) shows that the goal cannot be reached."""
+    path = _forge(tmp_path, "unreach", """
+        ###############
+        #A....#...#...#
+        #.....#...#...#
+        #..p..P...R.G.#
+        #.....#...#...#
+        #..o..#...#...#
+        #.....#...#.r.#
+        #~~.~~#...#...#
+        #.....E...#...#
+        #.....#...#...#
+        ###############
+        """, (3, 7))
+    assert _passes_cap(path, DEFAULT_CAP)
+    with pytest.raises(SpecError, match=r"the goal \(12, 3\) cannot be reached from the start \(1, 1\)"):
+        bfs.check_reachable(path)
+    with pytest.raises(SpecError, match="cannot be reached"):
+        bfs.check_reachable(path, max_states=1)
+
+
+def test_a_walled_in_ball_in_a_maze_too_large_to_search_is_named(tmp_path):
+    path = _forge(tmp_path, "walled", """
+        ###############
+        #A..#o#...#...#
+        #....##...#...#
+        #..p..P...R.G.#
+        #.....#...#...#
+        #.....#.r.#...#
+        #.....#...#...#
+        #~~.~~#...#...#
+        #.....E...#...#
+        #.....#...#...#
+        ###############
+        """, (3, 7))
+    assert _passes_cap(path, DEFAULT_CAP)
+    assert bfs.check_reachable(path) == ["ball"]
+    assert bfs.check_reachable(path, max_states=1) == ["ball"]     # the relaxation alone
+
+
+_MOVED = """
+    ###############
+    #.....#...#...#
+    #..o..E...#.G.#
+    #.....#...#...#
+    #~.~~~#...R...#
+    #.....#.r.#...#
+    #..A..#...#...#
+    #.....P...#...#
+    #.p...#...#...#
+    #.....#...#...#
+    ###############
+    """
+
+
+def test_a_subgoal_on_lava_is_never_achieved(tmp_path):
+    """Stepping onto the lava puts the agent on the cell, but the episode has ended there: the sub-goal
+    is of no use, so it counts as never achieved, in the exact search and in the relaxation."""
+    path = _forge(tmp_path, "lava", _MOVED, (1, 4))
+    spec = load_maze_spec(path)
+    s = spec.initial_state(0)
+    for a in bfs.plan(spec, "bridge"):          # the only way onto the cell ends the episode
+        s = bfs.transition(spec, s, spec.options.actions[a])
+    assert s.pos == (1, 4) and s.pos in spec.layout.lava
+    assert bfs.check_reachable(path) == ["bridge"]
+    assert bfs.check_reachable(path, max_states=1) == ["bridge"]
+    # the gap in the lava is an ordinary cell
+    assert bfs.check_reachable(_forge(tmp_path, "gap", _MOVED, (2, 4))) == []
+
+
+def test_a_maze_too_large_to_search_with_everything_reachable_is_not_checked(tmp_path):
+    path = _forge(tmp_path, "gap", _MOVED, (2, 4))
+    assert _passes_cap(path, 2000)
+    assert bfs.check_reachable(path, max_states=2000) is None
+    assert bfs.check_reachable(path) == []
+
+
+def test_the_relaxation_misses_nothing_that_a_state_reaches(tmp_path):
+    """On random small mazes (open, closed and locked doors, keys and balls, lava, random action
+    subsets) every sub-goal the whole search achieves, and the goal, are reachable in the relaxation."""
+    rng = np.random.default_rng(7)
+    legend = ("y: {type: key, color: yellow}\n    r: {type: key, color: red}\n    o: {type: ball, color: green}\n"
+              "    Y: {type: door, color: yellow, locked: true}\n    R: {type: door, color: red, locked: true}\n"
+              "    d: {type: door, color: blue}\n    e: {type: door, color: grey, open: true}")
+    kinds = {"y": "carrying, args: {type: key, color: yellow}", "r": "carrying, args: {type: key, color: red}",
+             "o": "carrying, args: {type: ball, color: green}", "Y": "door_open, args: {color: yellow}",
+             "R": "door_open, args: {color: red}", "d": "door_open, args: {color: blue}",
+             "e": "door_open, args: {color: grey}"}
+    pruned = 0
+    for k in range(60):
+        w, h = int(rng.integers(4, 7)), int(rng.integers(3, 6))
+        inner = [(x, y) for x in range(1, w - 1) for y in range(1, h - 1)]
+        cells = [inner[i] for i in rng.permutation(len(inner))]
+        grid = {c: str(rng.choice(list("....##~"))) for c in cells}
+        grid[cells[0]], grid[cells[1]] = "A", "G"
+        items = list(rng.permutation(list(kinds)))[:min(len(cells) - 2, int(rng.integers(0, 5)))]
+        grid.update(zip(cells[2:], items))
+        rows = ["".join(grid.get((x, y), "#") for x in range(w)) for y in range(h)]
+        actions = ["left", "right"] + [a for a in ("forward", "pickup", "drop", "toggle") if rng.random() < 0.85]
+        subgoals = [f"  - {{name: at_{x}_{y}, kind: at, args: {{cell: [{x}, {y}]}}}}" for x, y in inner
+                    if grid[(x, y)] != "#"]
+        subgoals += [f"  - {{name: has_{c}, kind: {kinds[c]}}}" for c in items]
+        (tmp_path / f"m{k}.txt").write_text("\n".join(rows) + "\n")
+        (tmp_path / f"m{k}.yaml").write_text(
+            f"task: m{k}\nfamily: minigrid\noptions:\n  layout: m{k}.txt\n  legend:\n    {legend}\n"
+            f"  actions: [{', '.join(actions)}]\nsubgoals:\n  - {{name: goal, kind: goal}}\n"
+            + "\n".join(subgoals) + "\n")
+        spec = load_maze_spec(tmp_path / f"m{k}.yaml")
+        states = []
+        bfs._bfs(spec, spec.initial_state(0), lambda s: states.append(s) or False, max_states=10**7)
+        # from the start, and from a state part way (an object carried, doors opened) as an env may be in
+        for start in (spec.initial_state(0), states[int(rng.integers(len(states)))]):
+            achieved = set()
+
+            def visit(s):
+                if s.pos not in spec.layout.lava:
+                    achieved.update(i for i in range(len(spec.predicates)) if bfs.holds(spec, s, i))
+                return False
+
+            bfs._bfs(spec, start, visit, max_states=10**7)
+            goal, never = bfs._relaxed(spec, start)
+            assert not never & achieved, (rows, actions, start)
+            assert goal or 0 not in achieved, (rows, actions, start)
+            pruned += len(never)
+    assert pruned > 50    # and the relaxation does rule sub-goals out
 
 
 def test_goal_beyond_max_steps_gives_zero_return(tmp_path):
