@@ -73,10 +73,14 @@ def test_an_empty_most_probable_set_is_explained_under_the_table():
     (["train", "keydoor", "--model", "no-such-spec"], "no-such-spec"),
     (["evaluate", "/nonexistent/run"], "no such run directory"),
     (["subgoals", "/nonexistent/run"], "no such run directory"),
+    *[([verb, "NOT_A_RUN", *extra], "not a run directory (no checkpoint.pt)")       # a folder, but not a run
+      for verb, extra in (("review", []), ("render", []), ("evaluate", []), ("subgoals", []), ("diagnose", []),
+                          ("revise", ["--model", "keydoor-specific"]))],
 ])
 def test_bad_input_one_line_exit_2(argv, needle, capsys, tmp_path):
     if argv[0] == "train":
         argv = argv + ["--out", str(tmp_path / "o"), "--no-progress"]
+    argv = [str(tmp_path) if a == "NOT_A_RUN" else a for a in argv]
     assert main(argv) == 2
     assert needle in _one_error_line(capsys)
 

@@ -55,8 +55,9 @@ from typing import Any
 from ..envs import get_task
 from ..envs.subset import catalogue_order, check_subset
 from .io import truncate_csv, write_json, write_text, write_yaml
-from .run import (CHECKPOINT, EPISODE_LOGS, REVISIONS_CSV, RunConfig, RunError, _build, _run_checkpoint, _save,
-                  note_unlinked_goals, plot_run_curve, train, warn_goals_left_out)
+from .run import (EPISODE_LOGS, REVISIONS_CSV, RunConfig, RunError, _build, _save,
+                  note_unlinked_goals, plot_run_curve, run_dir_checkpoint, train,
+                  warn_goals_left_out)
 from .remap import TransferError, revise_agent_state
 
 __all__ = ["revise", "apply_revision", "load_revision_spec", "spec_changes", "objective_unchanged", "REVISIONS_DIR", "REVISION_FIELDS"]
@@ -137,9 +138,7 @@ def apply_revision(run_dir: str | Path, new_spec: str | Path, steps: int | None 
     """Revise the run's critic spec at its checkpoint (module docstring) without training; returns the
     revision's record (what revision.json holds)."""
     run_dir = Path(run_dir)
-    if not run_dir.is_dir():
-        raise RunError(f"{run_dir}: no such run directory; pass the --out folder of `hubsgo train`")
-    ckpt = _run_checkpoint(run_dir / CHECKPOINT)
+    ckpt = run_dir_checkpoint(run_dir)
     old = ckpt["config"]
     if old.get("agent") != "hubsgo" or "model_spec" not in old:
         raise RunError(f"{run_dir}: agent {old.get('agent')!r} has no sub-goal critic to revise; "

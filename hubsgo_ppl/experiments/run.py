@@ -260,6 +260,16 @@ def _run_checkpoint(path: Path) -> dict[str, Any]:
     return ckpt
 
 
+def run_dir_checkpoint(run_dir: Path) -> dict[str, Any]:
+    """The checkpoint of a run directory, with one line where ``run_dir`` is not one."""
+    if not run_dir.is_dir():
+        raise RunError(f"{run_dir}: no such run directory; pass the --out folder of `hubsgo train`")
+    if not (run_dir / CHECKPOINT).is_file():
+        raise RunError(f"{run_dir}: not a run directory (no {CHECKPOINT}); pass the --out folder of `hubsgo train`, "
+                       "after its first checkpoint")
+    return _run_checkpoint(run_dir / CHECKPOINT)
+
+
 def _restore(path: Path, ckpt: dict[str, Any], steps: int | None = None):
     """(env, agent) built from a checkpoint's config with the agent's state loaded; ``steps``: a new budget."""
     resolved = ckpt["config"]
@@ -283,9 +293,7 @@ def _restore(path: Path, ckpt: dict[str, Any], steps: int | None = None):
 def load_run(run_dir: str | Path):
     """(resolved config, env, agent, checkpoint) of a run directory, agent restored from its checkpoint."""
     run_dir = Path(run_dir)
-    if not run_dir.is_dir():
-        raise RunError(f"{run_dir}: no such run directory; pass the --out folder of `hubsgo train`")
-    ckpt = _run_checkpoint(run_dir / CHECKPOINT)
+    ckpt = run_dir_checkpoint(run_dir)
     env, agent = _restore(run_dir / CHECKPOINT, ckpt)
     return ckpt["config"], env, agent, ckpt
 
