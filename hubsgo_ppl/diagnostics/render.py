@@ -208,6 +208,8 @@ def _caption(rec: Recording, i: int) -> str:
     if ghat is None:
         text += ("\nG_t = G0 (no critic update yet)" if rec.filter_name == "critic"
                  else "\nno filter: chooses from G0")
+    elif not np.any(ghat):
+        text += "\nfilter G_t: {} (empty: chooses from G0)"
     else:
         text += "\nfilter G_t: {" + ", ".join(n for n, m in zip(rec.names, ghat) if m) + "}"
     return text
@@ -272,6 +274,8 @@ def render_episode(run_dir: str | Path, path: str | Path | None = None, seed: in
     run_dir = Path(run_dir)
     if tile_size < 8:
         raise RunError(f"--tile-size must be at least 8 pixels, got {tile_size}")
+    if path is not None and Path(path).suffix.lower() != ".gif":
+        raise RunError(f"--out {path}: render writes an animated GIF; give a path ending in .gif")
     cfg = read_run_config(run_dir)
     if cfg is not None:
         check_renderable(cfg)           # before building the env: a robosuite run is refused cheaply

@@ -212,7 +212,9 @@ def suggested_spec(r: Mapping[str, Any], spec: Mapping[str, Any], rare: float = 
         e = frozenset((c["u"], c["v"]))
         if e not in seen and not e & drop:
             edges.append([c["u"], c["v"], c["learned"]])
-    return {**spec, "name": f"{spec['name']}-reviewed", "subgoals": keep, "edges": edges}
+    out = {**spec, "name": f"{spec['name']}-reviewed", "subgoals": keep, "edges": edges}
+    out["task"] = spec.get("task") or r.get("task")      # a spec written without one names the run's task
+    return {k: v for k, v in out.items() if v is not None}
 
 
 def _previous_review(path: Path, names: list[str]) -> dict[str, Any] | None:

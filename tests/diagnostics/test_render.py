@@ -5,7 +5,7 @@ import pytest
 import yaml
 
 from hubsgo_ppl.cli import main
-from hubsgo_ppl.diagnostics.render import (CURRENT_COLOR, GHAT_COLOR, Recording, annotate_frames,
+from hubsgo_ppl.diagnostics.render import (CURRENT_COLOR, GHAT_COLOR, Recording, _caption, annotate_frames,
                                            check_renderable, record_episode, render_episode)
 from hubsgo_ppl.experiments.run import RunConfig, RunError, evaluate, load_run, train
 
@@ -52,6 +52,10 @@ def test_cli_render(run, tmp_path, capsys):
     assert main(["render", str(run), "--out", str(path), "--seed", "4", "--tile-size", "8"]) == 0
     out = capsys.readouterr().out
     assert out.startswith(f"{path}: ") and "frames, one greedy episode of" in out and path.is_file()
+    assert main(["render", str(run), "--out", str(tmp_path / "episode.png")]) == 2      # GIF data in a .png: no
+    err = capsys.readouterr().err.strip()
+    assert err == f"hubsgo: error: --out {tmp_path / 'episode.png'}: render writes an animated GIF; give a path ending in .gif"
+    assert not (tmp_path / "episode.png").exists()
 
 
 def test_outlines_mark_the_current_subgoal_and_the_filters_set():
@@ -73,6 +77,10 @@ def test_outlines_mark_the_current_subgoal_and_the_filters_set():
     assert edge(imgs[0], (3, 3)) == (0, 0, 0)           # not in Ĝt: no outline
     assert edge(imgs[2], (3, 1)) == CURRENT_COLOR and edge(imgs[2], (1, 1)) == GHAT_COLOR
     assert rec.decision_at(1)[0] == 0 and rec.decision_at(2)[:1] == (1,) and rec.decision_at(2)[2] == 2
+    assert _caption(rec, 0).splitlines()[1] == "filter G_t: {k, d}"
+    empty = Recording(["k", "d", "g"], frames, [np.zeros(3, bool)] * 3, targets, [(0, 0, np.zeros(3, bool))],
+                      stats, env_seed=0, tile_size=t, filter_name="critic")
+    assert _caption(empty, 0).splitlines()[1] == "filter G_t: {} (empty: chooses from G0)"
 
 
 def _fake_run(tmp_path, **config):

@@ -327,6 +327,11 @@ def test_the_suggested_spec_applies_the_reviews_changes_and_adds_nothing():
     assert suggested_spec({**r, "critic_updates": 0}, spec)["subgoals"] == spec["subgoals"]
     # no suggestions: the spec as it was, renamed
     assert suggested_spec({}, spec) == {**spec, "name": "toy-reviewed"}
+    # a spec written without a task names the run's; no key is written as null
+    bare = {**spec, "task": None, "likelihood": None}
+    assert suggested_spec({"task": "moat"}, bare) == {k: v for k, v in {**spec, "name": "toy-reviewed",
+                                                                         "task": "moat"}.items()}
+    assert "task" not in suggested_spec({}, bare)
 
 
 def test_review_says_which_edge_holds_a_subgoal_the_successes_skip(run, tmp_path):
