@@ -296,6 +296,17 @@ class _Parser(argparse.ArgumentParser):
         raise UsageError(f"{message}; see `{self.prog} --help`")
 
 
+def _seed(text: str) -> int:
+    """A seed as numpy's generators take it: a whole number, 0 or more."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a seed is a whole number, 0 or more; got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"a seed is a whole number, 0 or more; got {value}")
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
     from .agents.factory import agent_names
     from .experiments.run import CHECKPOINT_STEPS
@@ -310,7 +321,7 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--graph", choices=["specific", "fully_connected", "independent"],
                    help="override the spec's graph preset")
     t.add_argument("--steps", type=int, help="environment-step budget (default: per task family)")
-    t.add_argument("--seed", type=int, help="default 0")
+    t.add_argument("--seed", type=_seed, help="default 0")
     t.add_argument("--out", help="run directory (default runs/TASK-AGENT-sSEED)")
     t.add_argument("--resume", action="store_true", help="continue the run in --out from its checkpoint")
     t.add_argument("--low-level", choices=["learned", "scripted"], help="low level (default: per family)")
@@ -345,7 +356,7 @@ def build_parser() -> argparse.ArgumentParser:
     e = sub.add_parser("evaluate", help="greedy return and success rate of a trained run")
     e.add_argument("run_dir")
     e.add_argument("--episodes", type=int, default=10)
-    e.add_argument("--seed", type=int, default=None, help="evaluation seed (default: derived from the run's)")
+    e.add_argument("--seed", type=_seed, default=None, help="evaluation seed (default: derived from the run's)")
     e.add_argument("--no-break-cycles", action="store_true",
                    help="evaluate the bare greedy low level; by default a step in a state where it already "
                         "acted greedily for the same sub-goal in the episode is random, as in training")
@@ -391,7 +402,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="couplings with |J| at most this have no sign (neither contradict nor suggest one)")
     v.add_argument("--out", help="review folder (default RUN_DIR/review; its review.json is the trend's baseline)")
     v.add_argument("--no-gif", action="store_true", help="skip the greedy-episode GIF (MiniGrid mazes)")
-    v.add_argument("--seed", type=int, default=None, help="evaluation seed of the GIF's episode")
+    v.add_argument("--seed", type=_seed, default=None, help="evaluation seed of the GIF's episode")
     v.add_argument("--samples", type=int, default=10_000, help="critic samples for G*")
     v.add_argument("--top-k", type=int, default=5, help="sub-goal sets listed")
     v.add_argument("--last", type=int, default=20, help="episodes of metrics.csv summarised")
@@ -400,7 +411,7 @@ def build_parser() -> argparse.ArgumentParser:
     n = sub.add_parser("render", help="animated GIF of one greedy episode on a MiniGrid maze, sub-goals marked")
     n.add_argument("run_dir")
     n.add_argument("--out", help="GIF to write (default RUN_DIR/episode.gif)")
-    n.add_argument("--seed", type=int, default=None, help="evaluation seed (default: derived from the run's)")
+    n.add_argument("--seed", type=_seed, default=None, help="evaluation seed (default: derived from the run's)")
     n.add_argument("--tile-size", type=int, default=32, help="pixels per grid cell")
     n.add_argument("--fps", type=float, default=6.0, help="frames per second")
     n.set_defaults(func=cmd_render)

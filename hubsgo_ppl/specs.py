@@ -10,6 +10,7 @@ Specs are strict (unknown keys are errors), following Pyro's habit of rejecting 
 from __future__ import annotations
 
 import difflib
+import math
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -62,9 +63,12 @@ def load_yaml(path: str | Path) -> dict[str, Any]:
     if not path.is_file():
         raise SpecError(f"{path}: no such spec file; check the path or use a built-in name")
     try:
-        data = yaml.safe_load(path.read_text())
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except UnicodeDecodeError as exc:
+        raise SpecError(f"{path}: not UTF-8 text (byte {exc.start}); save it as UTF-8") from None
     except yaml.YAMLError as exc:
-        raise SpecError(f"{path}: not valid YAML ({exc}); fix the syntax") from None
+        msg = " ".join(str(exc).split())
+        raise SpecError(f"{path}: not valid YAML ({msg}); fix the syntax") from None
     if not isinstance(data, dict):
         raise SpecError(f"{path}: <top level>: expected a mapping of keys, got {type(data).__name__}")
     return data
@@ -116,6 +120,27 @@ DEFAULT_PRIOR = {"name": "ising", "strength": 3.0, "field": -2.0}
 DEFAULT_LIKELIHOOD = {"name": "outcome", "flip": 0.02}
 
 
+#: the sizes a prior's or likelihood's number may take (or 0): the critic computes in float32, where
+#: a field of -1e39 overflows and a scale of 1e-320 is 0, and far inside those limits a probability
+#: has long saturated
+PARAM_RANGE = (1e-9, 1e9)
+
+
+def _numbers_in_range(kind: str, v: ComponentSpec) -> ComponentSpec:
+    lo, hi = PARAM_RANGE
+    for key, value in v.params().items():
+        if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+            continue        # another type is the component's own to check
+        try:
+            x = abs(float(value))       # YAML reads 1e-3 (no dot) as text; the components take it as a number
+        except ValueError:
+            continue
+        if not (x == 0 or lo <= x <= hi):       # NaN fails both
+            raise ValueError(f"{v.name!r}: {key} = {value!r} is out of range; give a number between "
+                             f"{lo:g} and {hi:g} in size, or 0")
+    return v
+
+
 class ModelSpec(StrictModel):
     """A critic spec; see models/example-specific.yaml.
 
@@ -155,14 +180,18 @@ class ModelSpec(StrictModel):
 
         if v.name not in PRIORS:
             raise ValueError(f"unknown prior {v.name!r}; registered: {', '.join(sorted(PRIORS))}")
-        return v
+        return _numbers_in_range("prior", v)
 
     @field_validator("likelihood")
     @classmethod
     def _likelihood_ok(cls, v: ComponentSpec) -> ComponentSpec:
         from .infer.likelihoods import get_likelihood
 
-        get_likelihood(v.name, **v.params())  # ValueError names the bad key, or lists registered names
+        _numbers_in_range("likelihood", v)
+        try:
+            get_likelihood(v.name, **v.params())  # ValueError names the bad key, or lists registered names
+        except TypeError as exc:
+            raise ValueError(f"likelihood {v.name!r}: {exc}; give each parameter a number") from None
         return v
 
     @model_validator(mode="after")
@@ -185,7 +214,10 @@ class ModelSpec(StrictModel):
         from .graph import SubgoalGraph
         from .infer.priors import get_prior
 
-        prior = get_prior(self.prior.name, SubgoalGraph(self.subgoals), **self.prior.params())
+        try:
+            prior = get_prior(self.prior.name, SubgoalGraph(self.subgoals), **self.prior.params())
+        except TypeError as exc:        # a parameter of the wrong type (a list where a number goes)
+            raise ValueError(f"prior {self.prior.name!r}: {exc}; give each parameter a number") from None
         if "init" not in self.inference.model_fields_set:    # left out: start at the prior where the guide can
             self.inference.init = "prior" if prior.natural_params() is not None else "edges"
         return self

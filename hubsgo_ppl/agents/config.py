@@ -30,6 +30,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import inspect
+import math
 import types
 import typing
 from typing import Annotated, Any, Sequence, Union
@@ -173,7 +174,45 @@ def validate_section(section: str, model: type[StrictModel], values: dict[str, A
         default = (defaults or {}).get(key, model.model_fields[key].default)
         raise ConfigError(f"{section + '.' if section else ''}{key} takes {kind} (default {default!r}), "
                           f"got {values[key]!r}", section or None, key) from None
-    return {k: getattr(parsed, k) for k in values}
+    out = {k: getattr(parsed, k) for k in values}
+    for key, value in out.items():
+        problem = _out_of_bounds(key, value)
+        if problem:
+            default = (defaults or {}).get(key, model.model_fields[key].default)
+            raise ConfigError(f"{section + '.' if section else ''}{key} must be {problem} (default {default!r}), "
+                              f"got {values[key]!r}", section or None, key)
+    return out
+
+
+#: bounds of the settings of these names, in whichever section they appear: (lowest, highest, whether
+#: the lowest itself is allowed); None: no bound. A value past them would hang a loop, divide by zero
+#: or fill the networks with NaN.
+_BOUNDS = {"option_steps": (1, None, True), "batch_size": (1, None, True), "buffer_size": (1, None, True),
+           "train_freq": (1, None, True), "target_update_interval": (1, None, True), "n_steps": (1, None, True),
+           "n_epochs": (1, None, True), "learning_starts": (0, None, True), "lr": (0, None, False),
+           "learning_rate": (0, None, False), "gamma": (0, 1, True), "tau": (0, 1, False)}
+
+
+def _out_of_bounds(key: str, value: Any) -> str | None:
+    """What ``value`` of the setting ``key`` must be, where it is not; None where it is fine."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return "a finite number"
+    if isinstance(value, bool) or not isinstance(value, (int, float, tuple)):
+        return None
+    if key == "hidden" and isinstance(value, tuple):
+        return "a list of positive layer sizes" if any(not isinstance(h, int) or h < 1 for h in value) else None
+    if isinstance(value, tuple):
+        return None
+    if key.endswith("_fraction") and not 0 < value <= 1:
+        return "in (0, 1]"
+    if key.startswith(("explore_", "low_explore_", "filter_start", "filter_end")) and not 0 <= value <= 1:
+        return "in [0, 1]"
+    lo, hi, closed = _BOUNDS.get(key, (None, None, True))
+    if lo is not None and (value < lo or (value == lo and not closed)):
+        return f"{'at least' if closed else 'above'} {lo}" + (f" and at most {hi}" if hi is not None else "")
+    if hi is not None and value > hi:
+        return f"at most {hi}" + (f" and {'at least' if closed else 'above'} {lo}" if lo is not None else "")
+    return None
 
 
 def make_config(section: str, cls: type, values: dict[str, Any], **derived: Any) -> Any:

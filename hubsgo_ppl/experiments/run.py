@@ -116,6 +116,8 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
         raise RunError(f"--steps must be positive, got {cfg.steps}")
     if int(cfg.checkpoint_steps) <= 0:
         raise RunError(f"checkpoint_steps must be a positive number of env steps, got {cfg.checkpoint_steps}")
+    if isinstance(cfg.seed, bool) or not isinstance(cfg.seed, int) or cfg.seed < 0:
+        raise RunError(f"a seed is a whole number, 0 or more; got {cfg.seed!r}")
     try:        # the preset, the task's settings and --set merged and validated (agents/config.py)
         hyper = resolve_hyper(info.family, info.name, cfg.agent, cfg.overrides, steps=cfg.steps,
                               low_level=cfg.low_level)
@@ -242,8 +244,7 @@ def _log_episode(logger: Logger, stats: Any, wall: float) -> None:
     logger.dump(stats.env_steps)
     bad = [k for k, v in stats.scalars.items() if not math.isfinite(float(v))]
     if bad:
-        raise FloatingPointError(f"non-finite training statistics {bad} at episode {stats.episode}; "
-                                 "lower the learning rates (e.g. --set high.lr=3e-4) and --resume")
+        raise FloatingPointError(f"non-finite training statistics {bad} at episode {stats.episode}")
 
 
 def _save(out: Path, resolved: dict[str, Any], agent: Any, wall: float) -> None:
@@ -516,6 +517,12 @@ def train(cfg: RunConfig, out: str | Path, resume: bool = False, progress: bool 
                     if "critic/loss" in stats.scalars:
                         post["critic"] = f"{stats.scalars['critic/loss']:.3g}"
                     bar.set_postfix(post, refresh=False)
+        except FloatingPointError as exc:
+            kept = (f"{out / CHECKPOINT} holds the last checkpoint" if (out / CHECKPOINT).exists()
+                    else "it diverged before its first checkpoint")
+            raise FloatingPointError(f"{exc} (env step {agent.env_steps:,}): training diverged; {kept}; start a new "
+                                     "run (another --out) with lower learning rates, e.g. --set high.lr=3e-4 "
+                                     "--set low.lr=1e-4") from None
         except KeyboardInterrupt:
             raise RunError(f"interrupted; {out / CHECKPOINT} holds the last checkpoint; "
                            f"continue with `hubsgo train {resolved['task_ref']} --out {out} --resume`") from None

@@ -29,9 +29,9 @@ class InferenceSpec(BaseModel):
     model_config = ConfigDict(extra="forbid", validate_assignment=True)
 
     lr: float = Field(0.05, gt=0, allow_inf_nan=False, description="Adam step size for theta and J")
-    burn_in: int = Field(32, ge=0, description="MH sweeps per update, from the chains' last state")
+    burn_in: int = Field(32, ge=0, le=1_000_000, description="MH sweeps per update, from the chains' last state")
     num_samples: int = Field(
-        64, ge=2, description="S: MH chains = vectorised ELBO particles per update (the leave-one-out score needs 2)")
+        64, ge=2, le=65_536, description="S: MH chains = vectorised ELBO particles per update (the leave-one-out score needs 2)")
     kernel: Literal["single_site", "block"] = Field(
         "single_site", description="MH kernel: chromatic single-site flip sweeps, or block flips")
     baseline_beta: float = Field(

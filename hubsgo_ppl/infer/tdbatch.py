@@ -12,10 +12,14 @@ from dataclasses import dataclass, fields
 
 import torch
 
-__all__ = ["TDBatch", "td_residuals"]
+__all__ = ["NonFiniteError", "TDBatch", "td_residuals"]
 
 
 _NOT_TD = ("available", "weight", "outcomes", "settled")
+
+
+class NonFiniteError(FloatingPointError, ValueError):
+    """A batch holds NaN or inf: the networks that made it have diverged (a ValueError too, as bad input)."""
 
 
 @dataclass
@@ -101,7 +105,7 @@ class TDBatch:
             if f.name in _NOT_TD:
                 continue
             if not bool(torch.isfinite(getattr(self, f.name)).all()):
-                raise ValueError(f"TDBatch.{f.name} has NaN or inf entries; check the Q-network outputs/rewards")
+                raise NonFiniteError(f"TDBatch.{f.name} has NaN or inf entries; check the Q-network outputs/rewards")
 
     @property
     def n(self) -> int:

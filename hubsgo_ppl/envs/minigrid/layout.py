@@ -410,7 +410,11 @@ def _build(cat: Catalogue) -> MazeSpec:
     if not path.is_file():
         raise _err(source, "options.layout", f"layout file {str(path)!r} not found; give a path "
                    f"relative to the catalogue's folder")
-    lay = parse_layout(path.read_text(), opts.legend, source=str(path))
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise SpecError(f"{path}: not UTF-8 text (byte {exc.start}); save the layout as UTF-8") from None
+    lay = parse_layout(text, opts.legend, source=str(path))
     carry_kinds = tuple(dict.fromkeys((o.type, o.color) for o in lay.carriables))
     preds = tuple(_compile_predicate(i, sg, lay, carry_kinds, source, path.name)
                   for i, sg in enumerate(cat.subgoals))
