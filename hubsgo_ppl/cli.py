@@ -424,6 +424,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     from .envs import UnknownTaskError
     from .experiments.io import CheckpointError
+    from .experiments.report import ReportError
     from .experiments.run import RunError
     from .specs import SpecError
 
@@ -441,7 +442,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())       # no second error when Python flushes stdout at exit
         return 1
-    except (SpecError, RunError, CheckpointError, UnknownTaskError, FloatingPointError) as exc:
+    except (SpecError, RunError, CheckpointError, ReportError, UnknownTaskError, FloatingPointError) as exc:
         msg = str(exc).strip().replace("\n", "; ")
         print(f"hubsgo: error: {msg}", file=sys.stderr)
         return 2

@@ -471,3 +471,22 @@ def test_a_run_whose_networks_diverge_ends_in_one_line(capsys, tmp_path):
     assert "has NaN or inf entries" in line and "training diverged; it diverged before its first checkpoint" in line
     assert line.endswith("start a new run (another --out) with lower learning rates, e.g. --set high.lr=3e-4 "
                          "--set low.lr=1e-4")
+
+
+@pytest.mark.parametrize("sweep_yaml, metrics, needle", [
+    (None, None, "no such sweep directory"),
+    ("- a list, not a sweep\n", "episode,env_steps,return,success\n1,10,0.5,1\n",
+     "sweep.yaml: not the sweep file `hubsgo sweep` writes (TypeError"),
+    (None, "episode,steps\n1,10\n", "metrics.csv: not a metrics file of `hubsgo train` ('return')"),
+    (None, b"\xff\xfe\x00garbage", "metrics.csv: not a metrics file of `hubsgo train`"),
+])
+def test_report_on_a_folder_that_is_not_a_sweep_gets_one_line(tmp_path, capsys, sweep_yaml, metrics, needle):
+    folder = tmp_path / "sweep"
+    if metrics is not None:
+        run = folder / "keydoor" / "hdqn" / "seed0"
+        run.mkdir(parents=True)
+        (run / "metrics.csv").write_bytes(metrics if isinstance(metrics, bytes) else metrics.encode())
+    if sweep_yaml is not None:
+        (folder / "sweep.yaml").write_text(sweep_yaml)
+    assert main(["report", str(folder)]) == 2
+    assert needle in _one_error_line(capsys)

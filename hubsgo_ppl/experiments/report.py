@@ -28,7 +28,7 @@ import yaml
 from .io import atomic_write, write_text
 from .logger import read_csv_rows
 
-__all__ = ["RunSummary", "Cell", "PAPER", "collect", "aggregate", "markdown_table", "curves", "write_report"]
+__all__ = ["ReportError", "RunSummary", "Cell", "PAPER", "collect", "aggregate", "markdown_table", "curves", "write_report"]
 
 #: The paper's reported numbers (mean, s.e.) by table, row label and task.
 PAPER: dict[str, dict[str, dict[str, tuple[float, float]]]] = {
@@ -84,17 +84,26 @@ class Cell:
     se: float                    # nan when n < 2
 
 
+class ReportError(Exception):
+    """A folder that does not hold what `hubsgo sweep` writes; the message says what is wrong."""
+
+
 def _layout(sweep_dir: Path) -> tuple[list[str], list[str], dict[str, str], str | None]:
     """(tasks, variants, labels, table) from ``sweep.yaml`` if present, else from the folder tree."""
     meta = sweep_dir / "sweep.yaml"
     if meta.is_file():
         from .sweep import column_folder
 
-        spec = yaml.safe_load(meta.read_text())
-        tasks = [column_folder(t["name"]) for t in spec["tasks"]]
-        variants = [v["name"] for v in spec["variants"]]
-        labels = {v["name"]: v.get("label") or v["name"] for v in spec["variants"]}
-        return tasks, variants, labels, spec.get("table")
+        try:
+            spec = yaml.safe_load(meta.read_text(encoding="utf-8"))
+            tasks = [column_folder(t["name"]) for t in spec["tasks"]]
+            variants = [v["name"] for v in spec["variants"]]
+            labels = {v["name"]: v.get("label") or v["name"] for v in spec["variants"]}
+            return tasks, variants, labels, spec.get("table")
+        except (yaml.YAMLError, UnicodeDecodeError, TypeError, KeyError, AttributeError) as exc:
+            raise ReportError(f"{meta}: not the sweep file `hubsgo sweep` writes ({type(exc).__name__}: "
+                              f"{' '.join(str(exc).split())}); delete it to report the folder's runs as found, "
+                              "or pass --sweep SWEEP.yaml") from None
     tasks = sorted(p.name for p in sweep_dir.iterdir() if p.is_dir() and p.name != "report")
     variants = sorted({v.name for t in tasks for v in (sweep_dir / t).iterdir() if v.is_dir()})
     return tasks, variants, {v: v for v in variants}, None
@@ -105,17 +114,20 @@ def collect(sweep_dir: str | Path) -> list[RunSummary]:
     sweep_dir = Path(sweep_dir)
     out = []
     for metrics in sorted(sweep_dir.glob("*/*/seed*/metrics.csv")):
-        rows = read_csv_rows(metrics)
+        run = metrics.parent
+        try:
+            rows = read_csv_rows(metrics)
+        except (UnicodeDecodeError, csv.Error) as exc:
+            raise ReportError(f"{metrics}: not a metrics file of `hubsgo train` ({exc})") from None
         if not rows:
             continue
-        run = metrics.parent
         try:
             rets = np.array([float(r["return"]) for r in rows])
             steps = np.array([float(r["env_steps"]) for r in rows])
             succ = np.array([float(r["success"]) for r in rows])
             seed = int(run.name[len("seed"):])
         except (KeyError, ValueError) as exc:
-            raise ValueError(f"{metrics}: not a metrics file of `hubsgo train` ({exc}); "
+            raise ReportError(f"{metrics}: not a metrics file of `hubsgo train` ({exc}); "
                              "expected columns episode, env_steps, return, success") from None
         tail = rets[-max(1, len(rets) // 10):]
         out.append(RunSummary(run.parent.parent.name, run.parent.name, seed, len(rows), int(steps[-1]),
@@ -240,7 +252,7 @@ def write_report(sweep_dir: str | Path, out: str | Path | None = None, bins: int
     """
     sweep_dir = Path(sweep_dir)
     if not sweep_dir.is_dir():
-        raise FileNotFoundError(f"{sweep_dir}: no such sweep directory; pass the --out folder of `hubsgo sweep`")
+        raise ReportError(f"{sweep_dir}: no such sweep directory; pass the --out folder of `hubsgo sweep`")
     runs = collect(sweep_dir)
     if sweep is not None:
         from .sweep import column_folder, load_sweep
@@ -251,7 +263,7 @@ def write_report(sweep_dir: str | Path, out: str | Path | None = None, bins: int
         table = spec.table
         runs = [r for r in runs if r.task in tasks and r.variant in variants and r.seed in spec.seeds]
     if not runs:
-        raise FileNotFoundError(f"{sweep_dir}: no runs with metrics (expected <task>/<variant>/seed<k>/metrics.csv)"
+        raise ReportError(f"{sweep_dir}: no runs with metrics (expected <task>/<variant>/seed<k>/metrics.csv)"
                                 f"{' of the grid ' + str(sweep) if sweep is not None else ''}; run `hubsgo sweep` first")
     if sweep is None:
         tasks, variants, labels, table = _layout(sweep_dir)

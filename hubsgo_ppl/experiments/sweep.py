@@ -105,6 +105,23 @@ class Variant(StrictModel):
             raise ValueError(f"unknown agent {v!r}; use one of: {', '.join(agent_names())}")
         return v
 
+    @field_validator("task", "model")
+    @classmethod
+    def _template_ok(cls, v: str | None) -> str | None:
+        if v is not None:
+            try:
+                v.format(task="x")
+            except (KeyError, ValueError, IndexError) as exc:
+                raise ValueError(f"{v!r}: only {{task}} may be filled in ({type(exc).__name__}: {exc})") from None
+        return v
+
+    @field_validator("low_level")
+    @classmethod
+    def _low_level_ok(cls, v: str | None) -> str | None:
+        if v is not None and v not in ("learned", "scripted"):
+            raise ValueError(f"unknown low level {v!r}; use learned or scripted")
+        return v
+
     @field_validator("graph")
     @classmethod
     def _graph_ok(cls, v: str | None) -> str | None:
@@ -185,7 +202,7 @@ def load_sweep(sweep: str | Path) -> tuple[SweepSpec, Path]:
             if v.tasks is None or t.name in v.tasks:
                 try:
                     get_task(anchored(v.task.format(task=t.name), base))
-                except (SpecError, KeyError) as exc:
+                except (SpecError, KeyError, ValueError, IndexError) as exc:
                     raise SpecError(f"{path}: variants[{j}].task: {v.task!r} for column {t.name!r}: {exc}; "
                                     "use a task name, optionally with {task}") from None
     return spec, path
@@ -212,6 +229,24 @@ def plan(spec: SweepSpec, sweep_dir: Path, base: Path | None = None) -> list[Job
                 run_id = f"{column_folder(t.name)}/{v.name}/seed{seed}"
                 jobs.append(Job(run_id, str(sweep_dir / run_id), budget, asdict(cfg)))
     return jobs
+
+
+def check_jobs(jobs: list[Job], path: Path) -> None:
+    """Resolve each distinct configuration of the grid (spec, settings, agent, low level) as its run
+    would, and refuse the sweep in one line at the first that cannot be, naming its run."""
+    from .run import resolve
+
+    seen: set[str] = set()
+    for job in jobs:
+        key = repr({k: v for k, v in job.config.items() if k != "seed"})
+        if key in seen:
+            continue
+        seen.add(key)
+        try:
+            resolve(RunConfig(**job.config))
+        except (SpecError, RunError, ValueError) as exc:
+            msg = " ".join(str(exc).split())
+            raise SpecError(f"{path}: run {job.run_id} cannot start: {msg}") from None
 
 
 def run_status(job: Job) -> str:
@@ -352,15 +387,16 @@ def run_sweep(sweep: str | Path, backend: str = "local", workers: int = 2, out: 
     that crashed twice. ``runs`` maps every run id to its final status.
     """
     if backend not in ("local", "ray"):
-        raise ValueError(f"unknown backend {backend!r}; use 'local' or 'ray'")
+        raise RunError(f"unknown backend {backend!r}; use 'local' or 'ray'")
     if workers < 1:
-        raise ValueError(f"--workers must be at least 1, got {workers}")
+        raise RunError(f"--workers must be at least 1, got {workers}")
     spec, path = load_sweep(sweep)
     part = select(spec, path, variants, tasks)
     sweep_dir = Path(out) if out is not None else Path("runs") / "sweeps" / spec.name
+    jobs = plan(part, sweep_dir, base=path.parent)
+    check_jobs(jobs, path)           # a misspelled spec or setting stops the sweep before any run starts
     sweep_dir.mkdir(parents=True, exist_ok=True)
     write_yaml(sweep_dir / "sweep.yaml", {**spec.model_dump(mode="json"), "source": str(path)})
-    jobs = plan(part, sweep_dir, base=path.parent)
     status = {j.run_id: run_status(j) for j in jobs}
     todo = [j for j in jobs if status[j.run_id] != "finished"]
     result: dict[str, Any] = {"sweep_dir": str(sweep_dir), "finished": 0,

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import yaml
 
-from hubsgo_ppl.experiments.report import PAPER, curves, collect, write_report
+from hubsgo_ppl.experiments.report import PAPER, ReportError, curves, collect, write_report
 
 VARIANTS = {"hubsgo-specific": "HUBS-GO (specific correlations)", "ppo": "PPO", "lonely": "lonely"}
 
@@ -91,10 +91,10 @@ def test_learning_curves_bin_by_steps_and_carry_forward(tmp_path):
 
 
 def test_report_errors_name_the_problem(tmp_path):
-    with pytest.raises(FileNotFoundError, match="no such sweep directory"):
+    with pytest.raises(ReportError, match="no such sweep directory"):
         write_report(tmp_path / "missing")
     (tmp_path / "empty").mkdir()
-    with pytest.raises(FileNotFoundError, match="no runs with metrics"):
+    with pytest.raises(ReportError, match="no runs with metrics"):
         write_report(tmp_path / "empty")
 
 

@@ -8,7 +8,7 @@ import pytest
 import yaml
 
 from hubsgo_ppl.experiments.logger import read_csv_rows
-from hubsgo_ppl.experiments.run import RunConfig, train
+from hubsgo_ppl.experiments.run import RunConfig, RunError, train
 from hubsgo_ppl.experiments.sweep import KILL_ENV, SweepSpec, load_sweep, plan, run_status, run_sweep
 from hubsgo_ppl.specs import SpecError, validate_spec
 
@@ -38,6 +38,10 @@ def _rows(path):
     ({"seeds": [0, 0]}, "seeds"),
     ({"variants": [{"name": "x", "agent": "hdqn", "task": "{task}_wrong"}]}, r"variants\[0\].task"),
     ({"budget": 3}, "budget: unknown key"),
+    ({"variants": [{"name": "x", "agent": "hubsgo", "model": "{bogus}-specific"}]},
+     r"variants\[0\].model: .*only \{task\} may be filled in"),
+    ({"variants": [{"name": "x", "agent": "hdqn", "task": "{task"}]}, r"variants\[0\].task: .*only \{task\}"),
+    ({"variants": [{"name": "x", "agent": "hdqn", "low_level": "magic"}]}, "unknown low level 'magic'"),
 ])
 def test_bad_sweep_files_name_the_file_and_key(tmp_path, change, message):
     path = _write(tmp_path, **change)
@@ -158,11 +162,23 @@ def test_ray_backend_runs_a_two_run_grid(tmp_path):
     assert (again["finished"], again["skipped"]) == (0, 2)
 
 
+@pytest.mark.parametrize("variant, message", [
+    ({"name": "x", "agent": "hubsgo", "model": "no-such-spec"}, "run fourroom/x/seed0 cannot start: no-such-spec"),
+    ({"name": "x", "agent": "hdqn", "overrides": ["loop.nosuch=1"]},
+     "run fourroom/x/seed0 cannot start: --set loop.nosuch=1: unknown key 'nosuch'"),
+])
+def test_a_run_of_the_grid_that_cannot_start_stops_the_sweep_before_any_run(tmp_path, variant, message):
+    path = _write(tmp_path, variants=[{"name": "hdqn", "agent": "hdqn"}, variant])
+    with pytest.raises(SpecError, match=message):
+        run_sweep(path, out=tmp_path / "x", progress=False)
+    assert not (tmp_path / "x").exists()
+
+
 def test_bad_backend_and_workers(tmp_path):
     path = _write(tmp_path)
-    with pytest.raises(ValueError, match="unknown backend"):
+    with pytest.raises(RunError, match="unknown backend"):
         run_sweep(path, backend="slurm", out=tmp_path / "x", progress=False)
-    with pytest.raises(ValueError, match="at least 1"):
+    with pytest.raises(RunError, match="at least 1"):
         run_sweep(path, workers=0, out=tmp_path / "x", progress=False)
 
 
