@@ -137,9 +137,9 @@ def cmd_revise(args: argparse.Namespace) -> int:
 
 
 def _run_task(run_dir: Path) -> str:
-    import yaml
+    from .experiments.run import run_config
 
-    return str(yaml.safe_load((run_dir / "config.yaml").read_text())["task_ref"])
+    return str(run_config(run_dir)["task_ref"])
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
@@ -162,9 +162,15 @@ def cmd_subgoals(args: argparse.Namespace) -> int:
     if args.samples is not None and args.samples < 1:
         raise RunError(f"--samples must be a positive number of critic samples, got {args.samples}")
     path = run_dir / "subgoals.json"
+    table = None
     if path.exists() and not args.recompute and args.samples is None:    # --samples N asks for a new readout
-        table = json.loads(path.read_text())
-    else:
+        try:
+            table = json.loads(path.read_text(encoding="utf-8"))
+            _fmt_ranking(table)
+        except (UnicodeDecodeError, ValueError, KeyError, TypeError, AttributeError, IndexError):
+            print(f"hubsgo: note: {path} is damaged; G* is recomputed from the checkpoint", file=sys.stderr)
+            table = None
+    if table is None:
         resolved, env, agent, _ = load_run(run_dir)
         with contextlib.closing(env):
             if not (hasattr(agent, "filter") and hasattr(agent.filter, "critic")):

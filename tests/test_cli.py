@@ -490,3 +490,51 @@ def test_report_on_a_folder_that_is_not_a_sweep_gets_one_line(tmp_path, capsys, 
         (folder / "sweep.yaml").write_text(sweep_yaml)
     assert main(["report", str(folder)]) == 2
     assert needle in _one_error_line(capsys)
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory):
+    run = tmp_path_factory.mktemp("tiny") / "run"
+    assert main(["train", "keydoor", "--steps", "600", "--seed", "1", "--out", str(run), "--no-progress",
+                 "--checkpoint-steps", "200", *TINY]) == 0
+    return run
+
+
+BINARY = b"\xff\xfe\x00\x01garbage"
+
+
+@pytest.mark.parametrize("name, content, verb, expect", [
+    ("metrics.csv", BINARY, ["review", "RUN", "--no-gif"], "metrics.csv: damaged, not a CSV log"),
+    ("metrics.csv", b"a,b\n1,2\n", ["review", "RUN", "--no-gif"], "metrics.csv: damaged, its header lacks episode"),
+    ("metrics.csv", BINARY, ["train", "keydoor", "--out", "RUN", "--resume", "--steps", "900"],
+     "metrics.csv: damaged, not a CSV log"),
+    ("critic_history.csv", BINARY, ["diagnose", "RUN", "--chains", "2", "--draws", "50", "--burn-in", "5"],
+     "critic_history.csv: damaged, not a CSV log"),
+    ("critic_history.csv", BINARY, ["train", "keydoor", "--out", "RUN", "--resume", "--steps", "900"],
+     "critic_history.csv: damaged, not a CSV log"),
+    ("tb", None, ["train", "keydoor", "--out", "RUN", "--resume", "--steps", "900"],
+     "tb: a file where the TensorBoard folder goes; move it away"),
+    ("config.yaml", BINARY, ["review", "RUN", "--no-gif"], None),       # the checkpoint's copy serves
+    ("config.yaml", BINARY, ["revise", "RUN", "--model", "keydoor-specific", "--steps", "900"], None),
+    ("subgoals.json", b"{not json", ["subgoals", "RUN"], None),        # recomputed from the checkpoint
+    ("subgoals.json", BINARY, ["subgoals", "RUN"], None),
+])
+def test_a_damaged_run_file_gets_one_line_or_is_read_around(tiny_run, tmp_path, capsys, name, content, verb, expect):
+    run = tmp_path / "run"
+    shutil.copytree(tiny_run, run)
+    target = run / name
+    if target.is_dir():
+        shutil.rmtree(target)
+    target.write_bytes(content if content is not None else b"")
+    capsys.readouterr()
+    code = main([str(run) if a == "RUN" else a for a in verb] + (["--no-progress"] if verb[0] in ("train", "revise") else []))
+    if expect is None:
+        assert code == 0, capsys.readouterr().err
+        if name == "subgoals.json":
+            captured = capsys.readouterr()
+            assert "is damaged; G* is recomputed from the checkpoint" in captured.err
+            assert captured.out.startswith("G* from 10,000 critic samples")
+    else:
+        assert code == 2
+        assert expect in _one_error_line(capsys)
+        assert target.read_bytes() == (content if content is not None else b"")     # nothing is lost

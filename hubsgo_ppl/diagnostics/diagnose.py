@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from ..experiments.io import RunFileError
 from ..experiments.logger import read_csv_rows
 from ..experiments.run import RunError, load_run
 from .arviz import save_netcdf, summary, to_inference_data
@@ -53,10 +54,16 @@ def diagnose(run_dir: str | Path, chains: int = 4, draws: int = 2000, burn_in: i
     paths["mrf_graph"] = plot_mrf_graph(names, critic.marginals().detach().numpy(), edges,
                                         factors["pairwise"], out / "mrf_graph.png",
                                         title=f"learned critic: {resolved['task']} ({resolved.get('model', '')})")
-    rows = read_csv_rows(run_dir / "critic_history.csv")
+    rows = read_csv_rows(run_dir / "critic_history.csv", required=("env_steps",))
     if rows:
-        steps = np.array([float(r["env_steps"]) for r in rows])
-        marg = np.array([[float(r[n]) for n in names] for r in rows])
+        def number(text: str | None) -> float:     # a sub-goal a revision added has no value before it
+            return float(text) if text not in (None, "") else float("nan")
+
+        try:
+            steps = np.array([float(r["env_steps"]) for r in rows])
+            marg = np.array([[number(r.get(n)) for n in names] for r in rows])
+        except ValueError as exc:
+            raise RunFileError(f"{run_dir / 'critic_history.csv'}: damaged, a value is not a number ({exc})") from None
         paths["marginals"] = plot_marginals_history(steps, marg, names, out / "marginals.png")
     paths["netcdf"] = save_netcdf(idata, out / "posterior.nc")
     return {"summary": table, "paths": paths, "chains": chains, "draws": draws}

@@ -57,8 +57,8 @@ def read_run_config(run_dir: str | Path) -> dict[str, Any] | None:
     if not run_dir.is_dir():
         raise RunError(f"{run_dir}: no such run directory; pass the --out folder of `hubsgo train`")
     try:
-        cfg = yaml.safe_load((run_dir / "config.yaml").read_text())
-    except (OSError, yaml.YAMLError):
+        cfg = yaml.safe_load((run_dir / "config.yaml").read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):
         return None
     return cfg if isinstance(cfg, dict) else None
 

@@ -50,7 +50,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 import yaml
 
-from ..experiments.io import write_json, write_text
+from ..experiments.io import RunFileError, write_json, write_text
 from ..experiments.logger import read_csv_rows
 from ..experiments.run import RunError, load_run
 
@@ -230,7 +230,10 @@ def _previous_review(path: Path, names: list[str]) -> dict[str, Any] | None:
 
 
 def _first_history_row(path: Path, names: list[str]) -> dict[str, Any] | None:
-    rows = read_csv_rows(path) if path.exists() else []
+    try:
+        rows = read_csv_rows(path) if path.exists() else []
+    except RunFileError:
+        return None             # the trend then starts at this review
     if not rows or any(n not in rows[0] for n in names):
         return None
     try:
@@ -263,15 +266,18 @@ def achieved_frequencies(outcomes: Any, names: list[str]) -> dict[str, Any]:
 def metrics_summary(path: Path, names: list[str], last: int = 20) -> dict[str, Any] | None:
     """The last ``last`` training episodes of ``metrics.csv``: success rate, mean return and, where the
     log has ``visited/<name>`` columns, each sub-goal's frequency over those that succeeded."""
-    rows = read_csv_rows(path) if path.exists() else []
+    rows = read_csv_rows(path, required=("episode", "return", "success")) if path.exists() else []
     if not rows:
         return None
     rows = rows[-last:]
-    success = [float(r.get("success") or 0) > 0 for r in rows]
-    out: dict[str, Any] = {"episodes": len(rows), "first_episode": int(float(rows[0]["episode"])),
-                           "success_rate": float(np.mean(success)),
-                           "mean_return": float(np.mean([float(r.get("return") or 0) for r in rows])),
-                           "successes": int(sum(success)), "frequency": None}
+    try:
+        success = [float(r.get("success") or 0) > 0 for r in rows]
+        first = int(float(rows[0]["episode"]))
+        mean_return = float(np.mean([float(r.get("return") or 0) for r in rows]))
+    except ValueError as exc:
+        raise RunFileError(f"{path}: damaged, a value is not a number ({exc})") from None
+    out: dict[str, Any] = {"episodes": len(rows), "first_episode": first, "success_rate": float(np.mean(success)),
+                           "mean_return": mean_return, "successes": int(sum(success)), "frequency": None}
     cols = [f"visited/{n}" for n in names]
     if all(c in rows[0] for c in cols) and any(success):
         won = [r for r, s in zip(rows, success) if s]

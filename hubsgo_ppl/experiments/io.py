@@ -39,6 +39,10 @@ class CheckpointError(RuntimeError):
     """A checkpoint is missing, unreadable or unsafe; the message says which file and what to do."""
 
 
+class RunFileError(CheckpointError):
+    """Another file of a run directory (a CSV log, a JSON table) is damaged; the message names it."""
+
+
 def _create_temp(path: Path, suffix: str) -> Path:
     """A new, empty file next to ``path``, created like ``open()`` would (mode 0666 & ~umask)."""
     for _ in range(100):
@@ -122,8 +126,12 @@ def truncate_csv(path: str | Path, column: str, below: int) -> None:
     path = Path(path)
     if not path.exists():
         return
-    with path.open(newline="") as fh:
-        table = list(csv.reader(fh))
+    try:
+        with path.open(newline="", encoding="utf-8") as fh:
+            table = list(csv.reader(fh))
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise RunFileError(f"{path}: damaged, not a CSV log ({exc}); move it out of the run directory to go "
+                           "on without its rows") from None
     header, rows = (table[0], table[1:]) if table else ([], [])
     if column not in header:
         path.unlink()

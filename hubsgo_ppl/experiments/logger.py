@@ -27,14 +27,14 @@ from __future__ import annotations
 
 import csv
 import io
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from stable_baselines3.common.logger import KVWriter, TensorBoardOutputFormat, filter_excluded_keys
 from stable_baselines3.common.logger import Logger as SB3Logger
 
-from .io import write_text
+from .io import RunFileError, write_text
 
 __all__ = ["Logger", "CSVOutput", "TensorBoardOutput", "read_csv_rows"]
 
@@ -51,8 +51,12 @@ class CSVOutput(KVWriter):
         self.path = Path(path)
         self.fields: list[str] = []
         if self.path.exists() and self.path.stat().st_size > 0:
-            with self.path.open(newline="") as fh:
-                self.fields = next(csv.reader(fh), [])
+            try:
+                with self.path.open(newline="", encoding="utf-8") as fh:
+                    self.fields = next(csv.reader(fh), [])
+            except (UnicodeDecodeError, csv.Error) as exc:
+                raise RunFileError(f"{self.path}: damaged, not a CSV log ({exc}); move it out of the run "
+                                   "directory to go on without its rows") from None
 
     def write(self, key_values: dict[str, Any], key_excluded: Mapping[str, Any] | int | None = None,
               step: int = 0) -> None:
@@ -82,6 +86,9 @@ class TensorBoardOutput(TensorBoardOutputFormat):
         # not super().__init__: it would open a second events file, without purge_step
         from torch.utils.tensorboard import SummaryWriter
 
+        if Path(log_dir).exists() and not Path(log_dir).is_dir():
+            raise RunFileError(f"{log_dir}: a file where the TensorBoard folder goes; move it away")
+
         self.writer = SummaryWriter(log_dir=str(log_dir), purge_step=purge_step)
         self._is_closed = False
 
@@ -108,9 +115,20 @@ class Logger(SB3Logger):
             raise error
 
 
-def read_csv_rows(path: str | Path) -> list[dict[str, str]]:
+def read_csv_rows(path: str | Path, required: Sequence[str] = ()) -> list[dict[str, str]]:
+    """The rows of a CSV log (none if it is missing); a file that is not one, or whose header lacks a
+    ``required`` column, is refused in one line (:class:`RunFileError`)."""
     path = Path(path)
     if not path.exists():
         return []
-    with path.open(newline="") as fh:
-        return list(csv.DictReader(fh))
+    try:
+        with path.open(newline="", encoding="utf-8") as fh:
+            reader = csv.DictReader(fh)
+            rows = list(reader)
+            header = reader.fieldnames or []
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise RunFileError(f"{path}: damaged, not a CSV log ({exc})") from None
+    missing = [c for c in required if c not in header]
+    if rows and missing:
+        raise RunFileError(f"{path}: damaged, its header lacks {', '.join(missing)}")
+    return rows

@@ -56,7 +56,7 @@ from ..envs import get_task
 from ..envs.subset import catalogue_order, check_subset
 from .io import truncate_csv, write_json, write_text, write_yaml
 from .run import (EPISODE_LOGS, REVISIONS_CSV, RunConfig, RunError, _build, _save,
-                  note_unlinked_goals, plot_run_curve, run_dir_checkpoint, train,
+                  note_unlinked_goals, plot_run_curve, run_config, run_dir_checkpoint, train,
                   warn_goals_left_out)
 from .remap import TransferError, revise_agent_state
 
@@ -201,8 +201,6 @@ def revise(run_dir: str | Path, new_spec: str | Path, steps: int | None = None, 
     record = apply_revision(run_dir, new_spec, steps)
     summary = None
     if train_after:
-        import yaml
-
-        task = yaml.safe_load((Path(run_dir) / "config.yaml").read_text())["task_ref"]
+        task = run_config(run_dir)["task_ref"]
         summary = train(RunConfig(task=task), run_dir, resume=True, progress=progress, stop_at=stop_at)
     return {"revision": record, "summary": summary}

@@ -261,6 +261,21 @@ def _run_checkpoint(path: Path) -> dict[str, Any]:
     return ckpt
 
 
+def run_config(run_dir: str | Path) -> dict[str, Any]:
+    """A run's resolved config: its ``config.yaml``, or the checkpoint's copy where that file is missing
+    or damaged."""
+    import yaml
+
+    run_dir = Path(run_dir)
+    try:
+        cfg = yaml.safe_load((run_dir / "config.yaml").read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        cfg = None
+    if isinstance(cfg, dict) and {"task", "task_ref", "agent", "seed"} <= set(cfg):
+        return cfg
+    return run_dir_checkpoint(run_dir)["config"]
+
+
 def run_dir_checkpoint(run_dir: Path) -> dict[str, Any]:
     """The checkpoint of a run directory, with one line where ``run_dir`` is not one."""
     if not run_dir.is_dir():
@@ -551,13 +566,11 @@ def plot_run_curve(run_dir: str | Path, resolved: dict[str, Any] | None = None,
     """``learning_curve.png`` of a run (default ``RUN/learning_curve.png``) from its metrics.csv, with a
     dotted vertical line at the env step of each revision of its critic spec; None without episodes."""
     run_dir = Path(run_dir)
-    rows = read_csv_rows(run_dir / "metrics.csv")
+    rows = read_csv_rows(run_dir / "metrics.csv", required=("env_steps", "return", "success"))
     if not rows:
         return None
     if resolved is None:
-        import yaml
-
-        resolved = yaml.safe_load((run_dir / "config.yaml").read_text())
+        resolved = run_config(run_dir)
     path = Path(path) if path is not None else run_dir / "learning_curve.png"
     title = f"{resolved['agent']} on {resolved['task']} (seed {resolved['seed']})"
     steps, rets, succ = ([float(r[k]) for r in rows] for k in ("env_steps", "return", "success"))
