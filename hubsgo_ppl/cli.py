@@ -20,6 +20,7 @@ import contextlib
 import json
 import os
 import sys
+import traceback
 
 import numpy as np
 from pathlib import Path
@@ -460,6 +461,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"hubsgo: error: `hubsgo {what}` needs {module}, which is not installed; install the "
               f'{EXTRAS[module]} extra: pip install "hubsgo-ppl[{EXTRAS[module]}]"', file=sys.stderr)
         return 2
+    except Exception as exc:    # no check of ours names this: one line, and the traceback on request
+        if os.environ.get("HUBSGO_TRACEBACK"):
+            raise
+        frame = traceback.extract_tb(exc.__traceback__)[-1]
+        msg = " ".join(str(exc).split())[:300]
+        print(f"hubsgo: error: unexpected {type(exc).__name__}: {msg} (in {Path(frame.filename).name}, line "
+              f"{frame.lineno}); HUBSGO_TRACEBACK=1 shows the traceback", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

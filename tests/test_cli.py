@@ -538,3 +538,20 @@ def test_a_damaged_run_file_gets_one_line_or_is_read_around(tiny_run, tmp_path, 
         assert code == 2
         assert expect in _one_error_line(capsys)
         assert target.read_bytes() == (content if content is not None else b"")     # nothing is lost
+
+
+def test_an_error_no_check_names_gets_one_line_and_its_traceback_on_request(monkeypatch, capsys):
+    import hubsgo_ppl.cli as cli
+
+    def broken(args):
+        raise ZeroDivisionError("float division by zero")
+
+    monkeypatch.setattr(cli, "cmd_tasks", broken)
+    monkeypatch.delenv("HUBSGO_TRACEBACK", raising=False)
+    assert main(["tasks"]) == 1
+    line = _one_error_line(capsys)
+    assert line.startswith("hubsgo: error: unexpected ZeroDivisionError: float division by zero (in test_cli.py, line ")
+    assert line.endswith("HUBSGO_TRACEBACK=1 shows the traceback")
+    monkeypatch.setenv("HUBSGO_TRACEBACK", "1")
+    with pytest.raises(ZeroDivisionError):
+        main(["tasks"])
