@@ -461,6 +461,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"hubsgo: error: `hubsgo {what}` needs {module}, which is not installed; install the "
               f'{EXTRAS[module]} extra: pip install "hubsgo-ppl[{EXTRAS[module]}]"', file=sys.stderr)
         return 2
+    except OSError as exc:      # a folder that cannot be written, a full disk: the file and the reason
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"hubsgo: error: {where}{exc.strerror or exc}; check the folder's permissions and free space",
+              file=sys.stderr)
+        return 2
     except Exception as exc:    # no check of ours names this: one line, and the traceback on request
         if os.environ.get("HUBSGO_TRACEBACK"):
             raise

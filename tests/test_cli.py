@@ -555,3 +555,15 @@ def test_an_error_no_check_names_gets_one_line_and_its_traceback_on_request(monk
     monkeypatch.setenv("HUBSGO_TRACEBACK", "1")
     with pytest.raises(ZeroDivisionError):
         main(["tasks"])
+
+
+def test_a_folder_that_cannot_be_written_gets_one_line_naming_the_file(monkeypatch, capsys):
+    import hubsgo_ppl.cli as cli
+
+    def denied(args):
+        raise PermissionError(1, "Operation not permitted", "runs/kd/.eval.json.b1a5.tmp")
+
+    monkeypatch.setattr(cli, "cmd_tasks", denied)
+    assert main(["tasks"]) == 2
+    assert _one_error_line(capsys) == ("hubsgo: error: runs/kd/.eval.json.b1a5.tmp: Operation not permitted; check the "
+                                      "folder's permissions and free space")

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import math
 from pathlib import Path
 from typing import Any
 
@@ -252,8 +253,8 @@ def write_gif(images: list[Any], path: str | Path, fps: float = 6.0, hold_last_m
     """Write PIL images as a looping GIF, atomically; the last frame is held ``hold_last_ms``."""
     if not images:
         raise ValueError("no frames to write")
-    if fps <= 0:
-        raise RunError(f"--fps must be positive, got {fps}")
+    if not (math.isfinite(fps) and fps > 0):
+        raise RunError(f"--fps must be a positive number, got {fps}")
     step = max(20, int(round(1000 / fps)))
     durations = [step] * (len(images) - 1) + [max(step, int(hold_last_ms))]
     path = Path(path)
@@ -272,8 +273,8 @@ def render_episode(run_dir: str | Path, path: str | Path | None = None, seed: in
     from ..experiments.run import load_run
 
     run_dir = Path(run_dir)
-    if tile_size < 8:
-        raise RunError(f"--tile-size must be at least 8 pixels, got {tile_size}")
+    if not 8 <= tile_size <= 256:
+        raise RunError(f"--tile-size must be 8 to 256 pixels, got {tile_size}")
     if path is not None and Path(path).suffix.lower() != ".gif":
         raise RunError(f"--out {path}: render writes an animated GIF; give a path ending in .gif")
     cfg = read_run_config(run_dir)

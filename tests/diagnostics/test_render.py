@@ -56,6 +56,10 @@ def test_cli_render(run, tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert err == f"hubsgo: error: --out {tmp_path / 'episode.png'}: render writes an animated GIF; give a path ending in .gif"
     assert not (tmp_path / "episode.png").exists()
+    for flags, line in ((["--fps", "nan"], "--fps must be a positive number, got nan"),
+                        (["--tile-size", "100000"], "--tile-size must be 8 to 256 pixels, got 100000")):
+        assert main(["render", str(run), "--out", str(tmp_path / "x.gif"), *flags]) == 2
+        assert capsys.readouterr().err.strip() == f"hubsgo: error: {line}"
 
 
 def test_outlines_mark_the_current_subgoal_and_the_filters_set():
