@@ -23,6 +23,7 @@ an outcome likelihood waits for the first success on the new task).
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
@@ -162,6 +163,12 @@ def plan_transfer(resolved: dict[str, Any], source: str | Path,
                 f"{resolved['task']} {dst_size[0]}x{dst_size[1]}; the {src_mode} observation names absolute cells, so a "
                 f"network trained on one grid would misread the other; transfer the critic alone (--transfer critic) "
                 f"or observe egocentrically in both runs (--set env.obs_mode=egocentric)")
+        if (src_mode in _CELL_MODES and src["family"] == resolved["family"] == "minigrid"
+                and src["task_ref"] != resolved["task_ref"]):
+            print(f"hubsgo: note: --init-from {src_dir}: both runs observe {src_mode!r}, which names absolute cells, "
+                  f"so networks trained on {src['task']} read {resolved['task']}'s cells as {src['task']}'s; where "
+                  "the two layouts differ, observe egocentrically in both runs (--set env.obs_mode=egocentric), or "
+                  "transfer the critic alone (--transfer critic)", file=sys.stderr)
         if "low" in chosen and src_n != dst_n:
             raise TransferError(f"--init-from {src_dir}: action counts differ: {src['task']} has {src_n} actions, "
                                 f"{resolved['task']} {dst_n}; leave out the low level (--transfer critic,high)")

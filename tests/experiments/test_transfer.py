@@ -43,12 +43,15 @@ def sources(tmp_path_factory):
                                             ("threepair", "threepair_moved"), ("vault", "vault_moved"),
                                             ("annex", "annex_wide"), ("gallery", "gallery_turned"),
                                             ("moat", "moat_mirror")])
-def test_tiny_transfer_to_the_similar_task(sources, tmp_path, source, target):
+def test_tiny_transfer_to_the_similar_task(sources, tmp_path, source, target, capsys):
     src = load_checkpoint(sources[source] / "checkpoint.pt")["agent"]
     assert src["filter"]["critic"]["num_updates"] > 0
     out = tmp_path / target
     cfg = RunConfig(task=target, steps=600, seed=2, overrides=TINY + EGO.get(source, []), init_from=str(sources[source]))
     train(cfg, out, progress=False, max_episodes=0)          # the run's state before its first episode
+    # between two layouts, an observation of absolute cells gets a note; the egocentric one does not
+    noted = "which names absolute cells, so networks trained on" in capsys.readouterr().err
+    assert noted == (source not in EGO)
     start = load_checkpoint(out / "checkpoint.pt")
     agent = start["agent"]
     critic, scritic = agent["filter"]["critic"], src["filter"]["critic"]
