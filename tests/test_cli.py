@@ -199,6 +199,16 @@ def test_a_run_on_a_user_maze_given_by_a_relative_path_works_from_another_folder
     assert _one_error_line(capsys) == (f"hubsgo: error: hall.yaml: no such task catalogue file (relative to "
                                        f"{elsewhere}); check the path, or pass a built-in task name (`hubsgo tasks` "
                                        "lists them)")
+    # the layout edited after the run: read as it is now, with a warning; the catalogue gone: one line
+    assert "warning" not in capsys.readouterr().err
+    (mazes / "hall.txt").write_text("#######\n#A..#.#\n#.k.D.#\n#.#.#G#\n#######\n")
+    assert main(["evaluate", str(run), "--episodes", "1"]) == 0
+    assert (f"hubsgo: warning: {mazes / 'hall.yaml'} (or its layout) has changed since the run recorded it"
+            in capsys.readouterr().err)
+    (mazes / "hall.yaml").rename(mazes / "moved.yaml")
+    assert main(["evaluate", str(run), "--episodes", "1"]) == 2
+    assert _one_error_line(capsys) == (f"hubsgo: error: {mazes / 'hall.yaml'}: the run's task catalogue is no longer "
+                                       "there; put it (and its layout) back at that path to read or resume the run")
 
 
 def test_a_user_maze_whose_goal_cannot_be_reached_is_refused_before_a_run_starts(capsys, tmp_path):

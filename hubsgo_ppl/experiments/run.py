@@ -109,6 +109,44 @@ def task_ref(task: str | Path) -> str:
     return str(p.resolve()) if p.suffix in (".yaml", ".yml") else str(task)
 
 
+def _is_catalogue(task: str | Path) -> bool:
+    return Path(str(task)).suffix in (".yaml", ".yml")
+
+
+def catalogue_digest(path: str | Path) -> str:
+    """SHA-256 of a user's catalogue and the layout file it names: a run records it, and a run read
+    later says so where the files have changed since."""
+    import hashlib
+
+    import yaml
+
+    path = Path(path)
+    h = hashlib.sha256(path.read_bytes())
+    try:
+        options = (yaml.safe_load(path.read_text(encoding="utf-8")) or {}).get("options") or {}
+    except (UnicodeDecodeError, yaml.YAMLError, AttributeError):
+        return h.hexdigest()            # a damaged catalogue: its own bytes say it changed
+    layout = options.get("layout") if isinstance(options, dict) else None
+    if isinstance(layout, str) and (path.parent / layout).is_file():
+        h.update((path.parent / layout).read_bytes())
+    return h.hexdigest()
+
+
+def check_catalogue(resolved: dict[str, Any]) -> None:
+    """Before a run is rebuilt: refuse (one line) a user's catalogue that has gone, and warn where it
+    has changed since the run recorded it."""
+    ref = resolved.get("task_ref", "")
+    if not _is_catalogue(ref):
+        return
+    if not Path(ref).is_file():
+        raise RunError(f"{ref}: the run's task catalogue is no longer there; put it (and its layout) back at that "
+                       "path to read or resume the run")
+    recorded = resolved.get("task_digest")
+    if recorded is not None and catalogue_digest(ref) != recorded:
+        print(f"hubsgo: warning: {ref} (or its layout) has changed since the run recorded it; the run is read "
+              "with the files as they are now", file=sys.stderr)
+
+
 def resolve(cfg: RunConfig) -> dict[str, Any]:
     """Everything a run needs, as plain data (written to config.yaml and into checkpoints)."""
     info = get_task(cfg.task)
@@ -127,6 +165,7 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
         raise RunError(str(exc)) from None
     resolved: dict[str, Any] = {
         "task": info.name, "task_ref": task_ref(cfg.task), "family": info.family,
+        **({"task_digest": catalogue_digest(task_ref(cfg.task))} if _is_catalogue(cfg.task) else {}),
         "agent": cfg.agent, "seed": int(cfg.seed), "hyper": hyper,
         "checkpoint_steps": int(cfg.checkpoint_steps), "history_every": cfg.history_every, "threads": cfg.threads,
         "versions": {"hubsgo_ppl": __version__, "torch": str(torch.__version__), "python": platform.python_version()},
@@ -291,6 +330,7 @@ def _restore(path: Path, ckpt: dict[str, Any], steps: int | None = None):
     resolved = ckpt["config"]
     if steps is not None:
         resolved["hyper"]["steps"] = int(steps)
+    check_catalogue(resolved)
     env, agent = _build(resolved)
     try:
         agent.load_state_dict(ckpt["agent"])
