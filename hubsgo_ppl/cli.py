@@ -267,6 +267,9 @@ def cmd_review(args: argparse.Namespace) -> int:
     print(f"in G*, held by your positive edges, skipped by most successes: {'; '.join(held) or 'none'}")
     needed = [d["name"] for d in r["needed_not_in_g_star"]]
     print(f"achieved by every recent success, not in G*: {', '.join(needed) or 'none'}")
+    signs = [f"{c['u']}--{c['v']} {c['learned']} (J={c['J']:+.2f})" for c in r.get("suggested_signs", [])]
+    if signs:
+        print(f"edges you left unknown, with the sign the critic learned: {'; '.join(signs)}")
     together = [f"{c['u']}--{c['v']} ({c['both_frequency']:.0%})" for c in r.get("negative_edges_achieved_together", [])]
     print(f"your negative edges, both ends achieved by every recent success: {'; '.join(together) or 'none'}")
     succ = r["achieved"]["recent_successes"]

@@ -448,6 +448,9 @@ def test_resume_refuses_flags_that_would_change_the_run_and_keeps_config_yaml_wi
         assert needle in _one_error_line(capsys)
     assert main(["train", "fourroom", "--out", str(run), "--resume", "--no-progress"]) == 2
     assert "task fourroom (the run's is keydoor)" in _one_error_line(capsys)
+    assert main(["train", "keydoor", "--out", str(tmp_path / "new"), "--steps", "500", "--set", "steps=300"]) == 2
+    assert ("the budget is given twice, --steps 500 and --set steps=300; give it once"
+            in _one_error_line(capsys))
     # the command that started the run, repeated with --resume, continues it to a longer budget
     assert main([*start[:5], "900", *start[6:], "--resume"]) == 0
     ckpt = torch.load(run / "checkpoint.pt", weights_only=False)

@@ -156,6 +156,9 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
         raise RunError(f"checkpoint_steps must be a positive number of env steps, got {cfg.checkpoint_steps}")
     if isinstance(cfg.seed, bool) or not isinstance(cfg.seed, int) or cfg.seed < 0:
         raise RunError(f"a seed is a whole number, 0 or more; got {cfg.seed!r}")
+    budget_set = [o for o in cfg.overrides if o.split("=", 1)[0].strip() == "steps"]
+    if cfg.steps is not None and budget_set:
+        raise RunError(f"the budget is given twice, --steps {cfg.steps} and --set {budget_set[-1]}; give it once")
     try:        # the preset, the task's settings and --set merged and validated (agents/config.py)
         hyper = resolve_hyper(info.family, info.name, cfg.agent, cfg.overrides, steps=cfg.steps,
                               low_level=cfg.low_level)

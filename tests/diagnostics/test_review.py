@@ -136,7 +136,7 @@ def test_review_embeds_a_gif_of_a_greedy_episode(run, tmp_path):
     assert "![greedy episode](episode.gif)" in (out / "review.md").read_text()
 
 
-def test_cli_review_prints_summary(run, tmp_path, capsys):
+def test_cli_review_prints_summary(run, tmp_path, capsys, monkeypatch):
     out = tmp_path / "cli"
     assert main(["review", str(run), "--out", str(out), "--no-gif", "--threshold", "0.3"]) == 0
     text = capsys.readouterr().out
@@ -144,6 +144,17 @@ def test_cli_review_prints_summary(run, tmp_path, capsys):
     assert "in G*, held by your positive edges, skipped by most successes: " in text
     assert "achieved by every recent success, not in G*: " in text
     assert f"json: {out / 'review.json'}" in text and (out / "review.md").is_file()
+    assert "edges you left unknown" not in text         # this run's spec leaves no edge unknown
+    # an edge left unknown whose sign the critic learned is named on the terminal too
+    import hubsgo_ppl.diagnostics.review as review_mod
+
+    real = review_mod.review
+    sign = {"u": "yellow_key", "v": "blue_key", "human": "unknown", "J": -1.25, "learned": "negative",
+            "contradicts": False, "suggestion": "make it negative"}
+    monkeypatch.setattr(review_mod, "review", lambda *a, **k: {**real(*a, **k), "suggested_signs": [sign]})
+    assert main(["review", str(run), "--out", str(out), "--no-gif"]) == 0
+    assert ("edges you left unknown, with the sign the critic learned: yellow_key--blue_key negative (J=-1.25)"
+            in capsys.readouterr().out)
 
 
 def _one_error_line(capsys):
