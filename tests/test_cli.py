@@ -580,3 +580,32 @@ def test_a_folder_that_cannot_be_written_gets_one_line_naming_the_file(monkeypat
     assert main(["tasks"]) == 2
     assert _one_error_line(capsys) == ("hubsgo: error: runs/kd/.eval.json.b1a5.tmp: Operation not permitted; check the "
                                       "folder's permissions and free space")
+
+
+def test_a_transfer_to_a_users_maze_without_a_spec_takes_the_source_runs(capsys, tmp_path):
+    def maze(name, rows):
+        (tmp_path / f"{name}.txt").write_text(rows)
+        (tmp_path / f"{name}.yaml").write_text(yaml.safe_dump({
+            "task": name, "family": "minigrid",
+            "options": {"layout": f"{name}.txt", "legend": {"k": {"type": "key", "color": "red"},
+                                                              "D": {"type": "door", "color": "red", "locked": True}}},
+            "subgoals": [{"name": "key", "kind": "carrying", "args": {"type": "key", "color": "red"}},
+                         {"name": "door", "kind": "door_open", "args": {"color": "red"}},
+                         {"name": "goal", "kind": "goal"}]}))
+        return str(tmp_path / f"{name}.yaml")
+
+    hall, moved = maze("hall", "#######\n#A..#.#\n#.k.D.#\n#...#G#\n#######\n"), \
+        maze("hall_moved", "#######\n#Ak.#.#\n#...D.#\n#...#G#\n#######\n")
+    (tmp_path / "hall-spec.yaml").write_text(yaml.safe_dump({
+        "name": "hall-spec", "subgoals": ["key", "door", "goal"],
+        "edges": [["key", "door", "positive"], ["door", "goal", "positive"]]}))
+    src = tmp_path / "src"
+    assert main(["train", hall, "--model", str(tmp_path / "hall-spec.yaml"), "--out", str(src), "--steps", "300",
+                 "--no-progress", *TINY]) == 0
+    assert main(["train", moved, "--out", str(tmp_path / "dst"), "--steps", "200", "--no-progress"]) == 2
+    assert "has no built-in critic spec" in _one_error_line(capsys)
+    assert main(["train", moved, "--init-from", str(src), "--out", str(tmp_path / "dst"), "--steps", "200",
+                 "--no-progress", *TINY]) == 0
+    assert "hubsgo: note: no --model: the critic spec of the --init-from run, 'hall-spec'" in capsys.readouterr().err
+    cfg = yaml.safe_load((tmp_path / "dst" / "config.yaml").read_text())
+    assert cfg["model"] == "hall-spec" and cfg["init_from"]["parts"] == ["critic", "high", "low"]

@@ -178,11 +178,19 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
         from ..specs import SpecError, list_model_specs, load_model_spec, match_subgoals
 
         model = cfg.model or f"{info.name}-specific"
-        if cfg.model is None and model not in list_model_specs():
+        inherited = None
+        if cfg.model is None and model not in list_model_specs() and cfg.init_from is not None:
+            inherited = _source_spec(cfg.init_from)     # a user's maze started from another run: that run's spec
+        if cfg.model is None and model not in list_model_specs() and inherited is None:
             raise SpecError(f"task {info.name!r} has no built-in critic spec {model}: write one (its sub-goals, "
                             "your signed edges, the prior and the likelihood; models/keydoor-specific.yaml is an "
                             "example) and pass it with --model my_spec.yaml")
-        spec = load_model_spec(model, graph=cfg.graph)
+        if inherited is not None:
+            spec = inherited if cfg.graph is None else inherited.model_copy(update={"graph": cfg.graph})
+            model = spec.name
+            print(f"hubsgo: note: no --model: the critic spec of the --init-from run, {spec.name!r}", file=sys.stderr)
+        else:
+            spec = load_model_spec(model, graph=cfg.graph)
         source = f"model spec {model!r} for task {info.name!r}"
         if set(spec.subgoals) >= set(names):
             spec = match_subgoals(spec, list(names), source)
@@ -193,6 +201,17 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
         resolved["model_spec"] = spec.model_dump(mode="json")
         resolved["model"] = spec.name
     return resolved
+
+
+def _source_spec(run_dir: str | Path) -> Any:
+    """The critic spec a run was trained with (its checkpoint's copy), or None where it has none."""
+    from ..specs import ModelSpec
+
+    try:
+        spec = run_dir_checkpoint(Path(run_dir))["config"].get("model_spec")
+    except (RunError, CheckpointError):
+        return None             # the transfer's own checks name what is wrong with that run
+    return ModelSpec.model_validate(spec) if isinstance(spec, dict) else None
 
 
 def _task_goals(task_ref: str) -> list[str]:
