@@ -5,7 +5,7 @@
     hubsgo revise RUN_DIR --model NEW_SPEC [--steps TOTAL] [--stop-at STEP] [--no-train]
     hubsgo evaluate RUN_DIR [--episodes K]
     hubsgo subgoals RUN_DIR
-    hubsgo tasks
+    hubsgo tasks [TASK_OR_CATALOGUE ...] [--model SPEC]
     hubsgo diagnose RUN_DIR [--chains 4]
     hubsgo sweep SWEEP.yaml [--backend local|ray] [--workers K] [--variants NAME ...] [--tasks NAME ...]
     hubsgo report SWEEP_DIR
@@ -184,9 +184,14 @@ def cmd_subgoals(args: argparse.Namespace) -> int:
 
 
 def cmd_tasks(args: argparse.Namespace) -> int:
-    from .envs import tasks
+    from .envs import get_task, tasks
 
-    for name, info in tasks().items():
+    if args.model is not None and not args.task:
+        from .experiments.run import RunError
+
+        raise RunError("--model checks a spec against the tasks named: `hubsgo tasks TASK --model SPEC`")
+    chosen = {str(t): get_task(t) for t in args.task} if args.task else tasks()
+    for name, info in chosen.items():
         cat = info.catalogue
         print(f"{name}  ({info.family}, gymnasium id {info.env_id})")
         if cat.description:
@@ -194,7 +199,38 @@ def cmd_tasks(args: argparse.Namespace) -> int:
         for sg in cat.subgoals:
             desc = f": {sg.description}" if sg.description else ""
             print(f"    - {sg.name} [{sg.kind}]{desc}")
+        if args.task:
+            _check_task(name, info, args.model)
     return 0
+
+
+def _check_task(name: str, info: Any, model: str | None) -> None:
+    """What `hubsgo train` checks before a run, without training: a maze's reachability and optimum,
+    and the critic spec the run would use."""
+    from .experiments.run import RunConfig, resolve
+
+    if info.family == "minigrid":
+        from .envs.minigrid.bfs import check_reachable, optimal_steps
+
+        never = check_reachable(name)       # a goal no sequence reaches: SpecError
+        if never is None:
+            print("    reachability: too many states to check exactly; a coarser check over cells found nothing wrong")
+        elif never:
+            print(f"    reachability: WARNING: no reachable state achieves {', '.join(never)}")
+        else:
+            print(f"    reachability: the goal and every sub-goal can be reached; "
+                  f"shortest solution {optimal_steps(name)} steps")
+    from .specs import list_model_specs
+
+    if model is None and f"{info.name}-specific" not in list_model_specs():
+        print("    critic spec: none built in for this task; check yours with --model SPEC")
+        return
+    resolved = resolve(RunConfig(task=name, agent="hubsgo", model=model))
+    spec = resolved["model_spec"]
+    left = resolved.get("subgoals")
+    print(f"    critic spec {resolved['model']!r}: {len(spec['subgoals'])} sub-goals"
+          + (f" (a subset: {', '.join(left)})" if left else "") + f", {len(spec['edges'])} edges, prior "
+          f"{spec['prior']['name']}, likelihood {spec['likelihood']['name']}: valid for this task")
 
 
 def cmd_diagnose(args: argparse.Namespace) -> int:
@@ -426,7 +462,10 @@ def build_parser() -> argparse.ArgumentParser:
     n.add_argument("--fps", type=float, default=6.0, help="frames per second")
     n.set_defaults(func=cmd_render)
 
-    k = sub.add_parser("tasks", help="list the tasks and their sub-goal catalogues")
+    k = sub.add_parser("tasks", help="list the tasks and their sub-goal catalogues; given a task or catalogue, "
+                                     "check it (and --model) as `hubsgo train` would, without training")
+    k.add_argument("task", nargs="*", help="tasks or catalogue .yaml files to check (default: list every task)")
+    k.add_argument("--model", help="a critic spec to check against the tasks given")
     k.set_defaults(func=cmd_tasks)
     return p
 

@@ -609,3 +609,33 @@ def test_a_transfer_to_a_users_maze_without_a_spec_takes_the_source_runs(capsys,
     assert "hubsgo: note: no --model: the critic spec of the --init-from run, 'hall-spec'" in capsys.readouterr().err
     cfg = yaml.safe_load((tmp_path / "dst" / "config.yaml").read_text())
     assert cfg["model"] == "hall-spec" and cfg["init_from"]["parts"] == ["critic", "high", "low"]
+
+
+def test_tasks_checks_a_catalogue_and_a_spec_without_training(capsys, tmp_path):
+    (tmp_path / "hall.txt").write_text("#######\n#A..#.#\n#.k.D.#\n#...#G#\n#######\n")
+    catalogue = {"task": "hall", "family": "minigrid",
+                 "options": {"layout": "hall.txt", "legend": {"k": {"type": "key", "color": "red"},
+                                                              "D": {"type": "door", "color": "red", "locked": True}}},
+                 "subgoals": [{"name": "key", "kind": "carrying", "args": {"type": "key", "color": "red"}},
+                              {"name": "door", "kind": "door_open", "args": {"color": "red"}},
+                              {"name": "goal", "kind": "goal"}]}
+    (tmp_path / "hall.yaml").write_text(yaml.safe_dump(catalogue))
+    spec = tmp_path / "hall-spec.yaml"
+    spec.write_text(yaml.safe_dump({"name": "hall-spec", "subgoals": ["key", "door", "goal"],
+                                    "edges": [["key", "door", "positive"], ["door", "goal", "positive"]]}))
+    hall = str(tmp_path / "hall.yaml")
+    assert main(["tasks", hall, "--model", str(spec)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith(f"{hall}  (minigrid") and "    - door [door_open]" in out
+    assert "    reachability: the goal and every sub-goal can be reached; shortest solution 11 steps" in out
+    assert out[-1] == ("    critic spec 'hall-spec': 3 sub-goals, 2 edges, prior ising, likelihood outcome: valid for "
+                       "this task")
+    assert not list(tmp_path.glob("runs")) and not (tmp_path / "runs").exists()
+    assert main(["tasks", hall]) == 0
+    assert capsys.readouterr().out.splitlines()[-1] == "    critic spec: none built in for this task; check yours with --model SPEC"
+    # the key behind its own door: refused as `hubsgo train` refuses it
+    (tmp_path / "hall.txt").write_text("#######\n#A..#k#\n#...D.#\n#...#G#\n#######\n")
+    assert main(["tasks", hall, "--model", str(spec)]) == 2
+    assert "cannot be reached" in _one_error_line(capsys)
+    assert main(["tasks", "--model", str(spec)]) == 2
+    assert "--model checks a spec against the tasks named" in _one_error_line(capsys)
