@@ -57,18 +57,36 @@ def format_validation_error(source: str, err: ValidationError) -> str:
     return "\n".join(lines)
 
 
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """YAML's safe loader, refusing a key given twice in one mapping (where YAML keeps the last)."""
+
+    def construct_mapping(self, node: Any, deep: bool = False) -> dict[Any, Any]:
+        seen: set[Any] = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            if key in seen:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"duplicate key {key!r}: give each key once", key_node.start_mark)
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
 def load_yaml(path: str | Path) -> dict[str, Any]:
     """Read a YAML mapping, with errors that name the file."""
     path = Path(path)
     if not path.is_file():
         raise SpecError(f"{path}: no such spec file; check the path or use a built-in name")
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+        data = yaml.load(path.read_text(encoding="utf-8"), Loader=_UniqueKeyLoader)
     except UnicodeDecodeError as exc:
         raise SpecError(f"{path}: not UTF-8 text (byte {exc.start}); save it as UTF-8") from None
     except yaml.YAMLError as exc:
-        msg = " ".join(str(exc).split())
-        raise SpecError(f"{path}: not valid YAML ({msg}); fix the syntax") from None
+        mark = getattr(exc, "problem_mark", None)
+        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark is not None else ""
+        what = getattr(exc, "problem", None) or " ".join(str(exc).split())
+        context = getattr(exc, "context", None)
+        raise SpecError(f"{path}: not valid YAML ({where}{what}{', ' + context if context else ''}); "
+                        "fix the syntax") from None
     if not isinstance(data, dict):
         raise SpecError(f"{path}: <top level>: expected a mapping of keys, got {type(data).__name__}")
     return data
@@ -126,9 +144,27 @@ DEFAULT_LIKELIHOOD = {"name": "outcome", "flip": 0.02}
 PARAM_RANGE = (1e-9, 1e9)
 
 
+def _float_params(kind: str, name: str) -> set[str]:
+    """The parameters of a registered prior or likelihood whose defaults are numbers."""
+    import inspect
+
+    if kind == "prior":
+        from .infer.priors import PRIORS as table
+    else:
+        from .infer.likelihoods import LIKELIHOODS as table
+    cls = table.get(name)
+    if cls is None:
+        return set()
+    return {p.name for p in inspect.signature(cls.__init__).parameters.values()
+            if isinstance(p.default, (int, float)) and not isinstance(p.default, bool)}
+
+
 def _numbers_in_range(kind: str, v: ComponentSpec) -> ComponentSpec:
     lo, hi = PARAM_RANGE
+    numeric = _float_params(kind, v.name)
     for key, value in v.params().items():
+        if isinstance(value, bool) and key in numeric:
+            raise ValueError(f"{v.name!r}: {key} takes a number, got {value!r}")
         if isinstance(value, bool) or not isinstance(value, (int, float, str)):
             continue        # another type is the component's own to check
         try:
@@ -216,8 +252,9 @@ class ModelSpec(StrictModel):
 
         try:
             prior = get_prior(self.prior.name, SubgoalGraph(self.subgoals), **self.prior.params())
-        except TypeError as exc:        # a parameter of the wrong type (a list where a number goes)
-            raise ValueError(f"prior {self.prior.name!r}: {exc}; give each parameter a number") from None
+        except (TypeError, ValueError) as exc:     # a parameter of the wrong type (text or a list for a number)
+            raise ValueError(f"prior {self.prior.name!r} {self.prior.params()}: {exc}; give each parameter a "
+                             "number") from None
         if "init" not in self.inference.model_fields_set:    # left out: start at the prior where the guide can
             self.inference.init = "prior" if prior.natural_params() is not None else "edges"
         return self

@@ -639,3 +639,23 @@ def test_tasks_checks_a_catalogue_and_a_spec_without_training(capsys, tmp_path):
     assert "cannot be reached" in _one_error_line(capsys)
     assert main(["tasks", "--model", str(spec)]) == 2
     assert "--model checks a spec against the tasks named" in _one_error_line(capsys)
+
+
+def test_flags_and_spec_keys_that_would_be_ignored_are_refused_or_noted(capsys, tmp_path):
+    assert main(["train", "keydoor", "--agent", "hdqn", "--graph", "independent", "--out", str(tmp_path / "a"),
+                 "--steps", "100", "--no-progress"]) == 2
+    assert ("--graph independent sets the critic's graph, and agent 'hdqn' has no critic"
+            in _one_error_line(capsys))
+    spec = tmp_path / "s.yaml"
+    spec.write_text(yaml.safe_dump({"name": "s", "task": "fourroom", "graph": "independent",
+                                    "subgoals": ["yellow_key", "yellow_door", "blue_key", "blue_door", "goal"],
+                                    "edges": [["yellow_door", "goal", "positive"]]}))
+    assert main(["train", "keydoor", "--model", str(spec), "--out", str(tmp_path / "b"), "--steps", "100",
+                 "--no-progress", *TINY]) == 0
+    err = capsys.readouterr().err
+    assert "hubsgo: note: model spec 's' names task 'fourroom'; it is used for 'keydoor'" in err
+    assert "hubsgo: note: model spec 's' has graph independent, so its 1 edges are not used" in err
+    # a file where the run's folder goes
+    (tmp_path / "afile").write_text("x")
+    assert main(["train", "keydoor", "--out", str(tmp_path / "afile"), "--steps", "100", "--no-progress"]) == 2
+    assert f"--out {tmp_path / 'afile'}: a file, not a folder" in _one_error_line(capsys)

@@ -57,6 +57,10 @@ def test_valid_spec_builds_a_critic(tmp_path):
         ({"prior": {"name": "ising", "strength": [1, 2]}}, "prior 'ising'",
          "give each parameter a number"),
         ({"inference": {"num_samples": 10**11}}, "inference.num_samples", "less than or equal to 65536"),
+        ({"inference": {"lr": 1e300}}, "inference.lr", "less than or equal to 10"),
+        ({"prior": {"name": "ising", "strength": "abc"}}, "prior 'ising' {'strength': 'abc'}",
+         "could not convert string to float: 'abc'; give each parameter a number"),
+        ({"prior": {"name": "ising", "strength": True}}, "prior", "'ising': strength takes a number, got True"),
         ({"likelihood": {"name": "cauchy"}}, "likelihood", "registered: gaussian, laplace, outcome, student_t"),
         ({"edges": [["a", "b", "strong"]]}, "edges[0][2]", "positive"),
         ({"graph": "dense"}, "graph", "fully_connected"),
@@ -142,3 +146,16 @@ def test_a_spec_that_leaves_out_prior_likelihood_and_inference_gets_the_shipped_
     data.pop("prior")
     path.write_text(yaml.safe_dump(data))
     assert load_model_spec(path).inference.init == "edges"
+
+
+@pytest.mark.parametrize("text, fix", [
+    ("name: x\nsubgoals: [a, b\n", "not valid YAML (line 3, column 1: expected ',' or ']'"),
+    ("name: x\nsubgoals: [a, b]\nprior: {name: ising}\nprior: {name: bernoulli}\n",
+     "not valid YAML (line 4, column 1: duplicate key 'prior': give each key once)"),
+])
+def test_yaml_errors_name_the_line_and_a_key_given_twice_is_refused(tmp_path, text, fix):
+    path = tmp_path / "spec.yaml"
+    path.write_text(text)
+    with pytest.raises(SpecError) as err:
+        load_model_spec(path)
+    assert str(err.value).startswith(f"{path}: {fix}"), str(err.value)

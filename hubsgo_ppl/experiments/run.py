@@ -47,7 +47,7 @@ from ..agents.loop import HRLLoop
 from ..agents.seeding import CRITIC_STREAM, EVAL_SEED_OFFSET, episode_seed, stream_seed
 from ..envs import get_task, register
 from ..envs.subset import catalogue_order, check_subset, make_subset
-from .io import CheckpointError, is_temp_file, load_checkpoint, save_torch, truncate_csv, write_json, write_yaml
+from .io import CheckpointError, RunFileError, is_temp_file, load_checkpoint, save_torch, truncate_csv, write_json, write_yaml
 from .logger import CSVOutput, Logger, TensorBoardOutput, read_csv_rows
 from .plots import plot_learning_curve
 
@@ -132,12 +132,12 @@ def catalogue_digest(path: str | Path) -> str:
     return h.hexdigest()
 
 
-def check_catalogue(resolved: dict[str, Any]) -> None:
-    """Before a run is rebuilt: refuse (one line) a user's catalogue that has gone, and warn where it
-    has changed since the run recorded it."""
+def check_catalogue(resolved: dict[str, Any]) -> bool:
+    """Before a run is rebuilt: refuse (one line) a user's catalogue that has gone, and warn (and say
+    True) where it has changed since the run recorded it."""
     ref = resolved.get("task_ref", "")
     if not _is_catalogue(ref):
-        return
+        return False
     if not Path(ref).is_file():
         raise RunError(f"{ref}: the run's task catalogue is no longer there; put it (and its layout) back at that "
                        "path to read or resume the run")
@@ -145,6 +145,8 @@ def check_catalogue(resolved: dict[str, Any]) -> None:
     if recorded is not None and catalogue_digest(ref) != recorded:
         print(f"hubsgo: warning: {ref} (or its layout) has changed since the run recorded it; the run is read "
               "with the files as they are now", file=sys.stderr)
+        return True
+    return False
 
 
 def resolve(cfg: RunConfig) -> dict[str, Any]:
@@ -174,6 +176,9 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
         "versions": {"hubsgo_ppl": __version__, "torch": str(torch.__version__), "python": platform.python_version()},
     }
     names = info.catalogue.names
+    if cfg.graph is not None and cfg.agent != "hubsgo":
+        raise RunError(f"--graph {cfg.graph} sets the critic's graph, and agent {cfg.agent!r} has no critic; "
+                       "drop --graph, or train --agent hubsgo")
     if cfg.agent == "hubsgo" or cfg.model is not None:
         from ..specs import SpecError, list_model_specs, load_model_spec, match_subgoals
 
@@ -192,6 +197,12 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
         else:
             spec = load_model_spec(model, graph=cfg.graph)
         source = f"model spec {model!r} for task {info.name!r}"
+        if spec.task is not None and spec.task != info.name:
+            print(f"hubsgo: note: model spec {spec.name!r} names task {spec.task!r}; it is used for {info.name!r}, "
+                  "its sub-goals matched by name", file=sys.stderr)
+        if cfg.graph is None and spec.graph == "independent" and spec.edges:
+            print(f"hubsgo: note: model spec {spec.name!r} has graph independent, so its {len(spec.edges)} edges "
+                  "are not used; graph specific uses them", file=sys.stderr)
         if set(spec.subgoals) >= set(names):
             spec = match_subgoals(spec, list(names), source)
         else:       # some of the catalogue's sub-goals: the run's candidates are those (envs/subset.py)
@@ -269,7 +280,35 @@ def _build(resolved: dict[str, Any]):
     return env, agent
 
 
+def _readable_config(out: Path) -> dict[str, Any] | None:
+    import yaml
+
+    try:
+        cfg = yaml.safe_load((out / "config.yaml").read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        return None
+    return cfg if isinstance(cfg, dict) else None
+
+
+def _refuse_lost_checkpoint(out: Path) -> None:
+    """A run folder without a checkpoint whose logs go past the step of its second one lost it (a run
+    killed in the chunk that crosses the first may log past it unsaved): refuse to start that folder
+    afresh, which would remove the logs."""
+    cfg = _readable_config(out) or {}
+    every = int(cfg.get("checkpoint_steps", CHECKPOINT_STEPS))
+    try:
+        rows = read_csv_rows(out / "metrics.csv")
+        last = max((int(float(r["env_steps"])) for r in rows if r.get("env_steps")), default=0)
+    except (RunFileError, KeyError, ValueError):
+        last = 0
+    if last >= 2 * every:
+        raise RunError(f"{out}: {CHECKPOINT} is missing, though metrics.csv reaches env step {last:,}, past the "
+                       f"checkpoints every {every:,} steps; put the checkpoint back, or choose another --out")
+
+
 def _check_writable(out: Path) -> None:
+    if out.exists() and not out.is_dir():
+        raise RunError(f"--out {out}: a file, not a folder; choose a folder for the run")
     try:
         out.mkdir(parents=True, exist_ok=True)
         probe = out / ".write-test"
@@ -352,13 +391,18 @@ def _restore(path: Path, ckpt: dict[str, Any], steps: int | None = None):
     resolved = ckpt["config"]
     if steps is not None:
         resolved["hyper"]["steps"] = int(steps)
-    check_catalogue(resolved)
+    changed = check_catalogue(resolved)
     env, agent = _build(resolved)
     try:
         agent.load_state_dict(ckpt["agent"])
     except (KeyError, RuntimeError, ValueError) as exc:
         env.close()
-        raise CheckpointError(f"{path}: does not match its own config ({exc}); "
+        if changed:
+            raise CheckpointError(f"{path}: the run's networks do not fit {resolved['task_ref']} as it is now, which "
+                                  "has changed since the run recorded it; put the catalogue and its layout back as "
+                                  "they were") from None
+        msg = " ".join(str(exc).split())[:300]
+        raise CheckpointError(f"{path}: does not match its own config ({msg}); "
                               "the checkpoint is damaged; start a new run") from None
     except BaseException:
         env.close()
@@ -446,6 +490,8 @@ def _start(cfg: RunConfig, out: Path, resume: bool):
     checkpoint has nothing to resume: its partial files are removed and it starts afresh."""
     ckpt_path = out / CHECKPOINT
     started = any((out / name).exists() for name in RUN_FILES)
+    if started and not ckpt_path.exists():
+        _refuse_lost_checkpoint(out)
     if resume and (ckpt_path.exists() or not started):
         ckpt = _run_checkpoint(ckpt_path)
         _check_writable(out)
@@ -460,8 +506,9 @@ def _start(cfg: RunConfig, out: Path, resume: bool):
         elif done >= budget:
             print(f"hubsgo: {out} has finished its budget of {budget:,} env steps; nothing to train (pass --steps "
                   f"above {done} to train on)", file=sys.stderr)
+        on_disk = _readable_config(out)
         env, agent = _restore(ckpt_path, ckpt, cfg.steps)
-        if cfg.steps is not None and int(cfg.steps) != budget:      # config.yaml says what the checkpoint says
+        if on_disk != ckpt["config"]:       # config.yaml says what the checkpoint says (a new budget, a lost file)
             write_yaml(out / "config.yaml", ckpt["config"])
         # TensorBoard hides the interrupted writer's events after the checkpoint's last episode
         return ckpt["config"], env, agent, float(ckpt.get("wall_time", 0.0)), agent.env_steps + 1

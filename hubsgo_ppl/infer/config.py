@@ -28,7 +28,7 @@ class InferenceSpec(BaseModel):
 
     model_config = ConfigDict(extra="forbid", validate_assignment=True)
 
-    lr: float = Field(0.05, gt=0, allow_inf_nan=False, description="Adam step size for theta and J")
+    lr: float = Field(0.05, gt=0, le=10.0, allow_inf_nan=False, description="Adam step size for theta and J")
     burn_in: int = Field(32, ge=0, le=1_000_000, description="MH sweeps per update, from the chains' last state")
     num_samples: int = Field(
         64, ge=2, le=65_536, description="S: MH chains = vectorised ELBO particles per update (the leave-one-out score needs 2)")
