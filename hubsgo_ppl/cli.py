@@ -237,7 +237,11 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     import pandas as pd
 
     from .diagnostics.diagnose import diagnose
+    from .experiments.run import RunError
 
+    for flag, value, least in (("--chains", args.chains, 1), ("--draws", args.draws, 2), ("--burn-in", args.burn_in, 0)):
+        if value < least:
+            raise RunError(f"{flag} must be at least {least}, got {value}")
     result = diagnose(args.run_dir, chains=args.chains, draws=args.draws, burn_in=args.burn_in)
     table = result["summary"]
     with pd.option_context("display.width", 120, "display.max_columns", 20):

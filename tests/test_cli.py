@@ -659,3 +659,27 @@ def test_flags_and_spec_keys_that_would_be_ignored_are_refused_or_noted(capsys, 
     (tmp_path / "afile").write_text("x")
     assert main(["train", "keydoor", "--out", str(tmp_path / "afile"), "--steps", "100", "--no-progress"]) == 2
     assert f"--out {tmp_path / 'afile'}: a file, not a folder" in _one_error_line(capsys)
+
+
+def test_diagnose_revise_and_init_from_bad_values_get_one_line(tiny_run, tmp_path, capsys):
+    for argv, line in ((["diagnose", str(tiny_run), "--draws", "0"], "--draws must be at least 2, got 0"),
+                       (["diagnose", str(tiny_run), "--burn-in", "-1"], "--burn-in must be at least 0, got -1"),
+                       (["revise", str(tiny_run), "--model", "keydoor-specific", "--steps", "-5", "--no-train"],
+                        "--steps must be a positive number of env steps, got -5")):
+        assert main(argv) == 2
+        assert _one_error_line(capsys) == f"hubsgo: error: {line}"
+    broken = tmp_path / "broken"
+    shutil.copytree(tiny_run, broken)
+    (broken / "checkpoint.pt").write_bytes(b"garbage")
+    assert main(["train", "keydoor", "--init-from", str(broken), "--out", str(tmp_path / "o"), "--steps", "300",
+                 "--no-progress"]) == 2
+    line = _one_error_line(capsys)
+    assert "checkpoint is corrupt or unreadable" in line
+    assert line.endswith("; start from another run, or train without --init-from")
+
+
+def test_a_revision_that_changes_nothing_is_recorded_with_a_note(tiny_run, tmp_path, capsys):
+    run = tmp_path / "run"
+    shutil.copytree(tiny_run, run)
+    assert main(["revise", str(run), "--model", "keydoor-specific", "--steps", "900", "--no-train"]) == 0
+    assert "asks for the critic the run already has; it is recorded as revision 1" in capsys.readouterr().err

@@ -84,7 +84,10 @@ def atomic_path(path: str | Path, suffix: str = "") -> Iterator[Path]:
     by extension). Parent folders are created."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = _create_temp(path, suffix)
+    try:
+        tmp = _create_temp(path, suffix)
+    except OSError as exc:      # name the file the user asked for, not the temporary one
+        raise OSError(exc.errno, exc.strerror, str(path)) from None
     try:
         yield tmp
         fd = os.open(tmp, os.O_RDONLY)

@@ -119,7 +119,8 @@ def collect(sweep_dir: str | Path) -> list[RunSummary]:
             rows = read_csv_rows(metrics)
         except (UnicodeDecodeError, csv.Error) as exc:
             raise ReportError(f"{metrics}: not a metrics file of `hubsgo train` ({exc})") from None
-        if not rows:
+        rows = [r for r in rows if None not in r.values() and "" not in (r.get("return"), r.get("env_steps"))]
+        if not rows:        # (a row cut short by a kill mid-write is left out, as --resume cuts it)
             continue
         try:
             rets = np.array([float(r["return"]) for r in rows])

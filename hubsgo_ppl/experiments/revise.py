@@ -49,6 +49,7 @@ import contextlib
 import copy
 import csv
 import io
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -143,6 +144,8 @@ def apply_revision(run_dir: str | Path, new_spec: str | Path, steps: int | None 
     if old.get("agent") != "hubsgo" or "model_spec" not in old:
         raise RunError(f"{run_dir}: agent {old.get('agent')!r} has no sub-goal critic to revise; "
                        "revise a run trained with --agent hubsgo")
+    if steps is not None and int(steps) <= 0:
+        raise RunError(f"--steps must be a positive number of env steps, got {steps}")
     spec = load_revision_spec(new_spec, old)
     done = int(ckpt["env_steps"])
     total = int(steps) if steps is not None else int(old["hyper"]["steps"])
@@ -162,6 +165,9 @@ def apply_revision(run_dir: str | Path, new_spec: str | Path, steps: int | None 
     new["revision"] = number
 
     changes = spec_changes(old["model_spec"], new["model_spec"])
+    if objective_unchanged(changes):
+        print(f"hubsgo: note: {new_spec} asks for the critic the run already has; it is recorded as revision "
+              f"{number}, and the run goes on as it would have", file=sys.stderr)
     warn_goals_left_out(spec.name, old["task_ref"], new.get("subgoals"))
     note_unlinked_goals(new)
     env, agent = _build(new)

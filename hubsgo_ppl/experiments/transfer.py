@@ -121,7 +121,8 @@ def plan_transfer(resolved: dict[str, Any], source: str | Path,
     try:
         ckpt = load_checkpoint(src_dir / "checkpoint.pt")
     except CheckpointError as exc:
-        raise TransferError(f"--init-from: {exc}") from None
+        what = str(exc).split("; start a new run")[0].split("; use a checkpoint")[0].split("; point at")[0]
+        raise TransferError(f"--init-from: {what}; start from another run, or train without --init-from") from None
     src = ckpt.get("config")
     if not isinstance(src, dict) or "agent" not in ckpt:
         raise TransferError(f"--init-from {src_dir}: not a run of `hubsgo train` (its checkpoint has no config)")

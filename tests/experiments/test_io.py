@@ -123,3 +123,15 @@ def test_truncate_csv_keeps_rows_before_the_cut_and_drops_a_torn_row(tmp_path):
     assert not path.exists()
     truncate_csv(tmp_path / "missing.csv", "episode", 2)
     assert not (tmp_path / "missing.csv").exists()
+
+
+def test_a_folder_that_refuses_the_temporary_file_is_reported_by_the_files_own_name(tmp_path, monkeypatch):
+    import hubsgo_ppl.experiments.io as io_mod
+
+    def refuse(path, suffix=""):
+        raise PermissionError(1, "Operation not permitted", str(path.parent / ".eval.json.1234.tmp"))
+
+    monkeypatch.setattr(io_mod, "_create_temp", refuse)
+    with pytest.raises(OSError) as err:
+        io_mod.write_json(tmp_path / "eval.json", {"a": 1})
+    assert err.value.filename == str(tmp_path / "eval.json") and err.value.strerror == "Operation not permitted"

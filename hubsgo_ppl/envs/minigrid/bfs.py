@@ -395,8 +395,14 @@ def check_reachable(source: Any, max_states: int = 300_000) -> list[str] | None:
 def _unreachable(spec: MazeSpec, starts: list[MazeState]) -> SpecError:
     acts = spec.options.actions
     closed = any(d != 2 for d in starts[0].doors)
-    hint = ("there is no toggle action, so no closed door can be opened; add toggle to options.actions"
-            if closed and "toggle" not in acts else
-            "check that every locked door on the way has its key on the agent's side of it")
+    locked = any(d == 0 for d in starts[0].doors)
+    if closed and "toggle" not in acts:
+        hint = "there is no toggle action, so no closed door can be opened; add toggle to options.actions"
+    elif locked:
+        hint = "check that every locked door on the way has its key on the agent's side of it"
+    else:
+        hint = "walls or lava cut the start off from the goal; open a gap"
+    if "forward" not in acts:
+        hint = "there is no forward action, so the agent cannot move; add forward to options.actions"
     return SpecError(f"{spec.source}: the goal {spec.layout.goal} cannot be reached from the start "
                      f"{starts[0].pos} with the actions {', '.join(acts)}; {hint}")

@@ -164,6 +164,9 @@ def test_with_a_drop_action_the_check_first_searches_without_it(tmp_path):
     with pytest.raises(SpecError, match="cannot be reached"):
         bfs.check_reachable(_user_task(tmp_path, "########\n#Ar.yYG#\n########\n",
                                        actions="[left, right, forward, pickup, toggle]"))
+    # no door on the way, only lava: the message blames the walls and lava, not a key
+    with pytest.raises(SpecError, match="walls or lava cut the start off from the goal; open a gap"):
+        bfs.check_reachable(_user_task(tmp_path, "#######\n#A.~.G#\n#..~..#\n#######\n"))
     # a closed door and no toggle action: the message says which is missing
     with pytest.raises(SpecError, match="there is no toggle action, so no closed door can be opened"):
         bfs.check_reachable(_user_task(tmp_path, "########\n#A.yYG.#\n########\n",
