@@ -491,7 +491,7 @@ def test_a_run_whose_networks_diverge_ends_in_one_line(capsys, tmp_path):
     ("- a list, not a sweep\n", "episode,env_steps,return,success\n1,10,0.5,1\n",
      "sweep.yaml: not the sweep file `hubsgo sweep` writes (TypeError"),
     (None, "episode,steps\n1,10\n", "metrics.csv: not a metrics file of `hubsgo train` ('return')"),
-    (None, b"\xff\xfe\x00garbage", "metrics.csv: not a metrics file of `hubsgo train`"),
+    (None, b"\xff\xfe\x00garbage", "metrics.csv: damaged, not a CSV log"),
 ])
 def test_report_on_a_folder_that_is_not_a_sweep_gets_one_line(tmp_path, capsys, sweep_yaml, metrics, needle):
     folder = tmp_path / "sweep"
