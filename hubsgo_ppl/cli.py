@@ -225,12 +225,17 @@ def _check_task(name: str, info: Any, model: str | None) -> None:
     if model is None and f"{info.name}-specific" not in list_model_specs():
         print("    critic spec: none built in for this task; check yours with --model SPEC")
         return
+    from .experiments.run import note_unlinked_goals, warn_goals_left_out
+
     resolved = resolve(RunConfig(task=name, agent="hubsgo", model=model))
     spec = resolved["model_spec"]
     left = resolved.get("subgoals")
+    n_edges = len(spec["edges"])
     print(f"    critic spec {resolved['model']!r}: {len(spec['subgoals'])} sub-goals"
-          + (f" (a subset: {', '.join(left)})" if left else "") + f", {len(spec['edges'])} edges, prior "
+          + (f" (a subset: {', '.join(left)})" if left else "") + f", {n_edges} edge{'s' * (n_edges != 1)}, prior "
           f"{spec['prior']['name']}, likelihood {spec['likelihood']['name']}: valid for this task")
+    warn_goals_left_out(resolved["model"], resolved["task_ref"], left)      # as `hubsgo train` says them
+    note_unlinked_goals(resolved)
 
 
 def cmd_diagnose(args: argparse.Namespace) -> int:

@@ -633,6 +633,11 @@ def test_tasks_checks_a_catalogue_and_a_spec_without_training(capsys, tmp_path):
     assert not list(tmp_path.glob("runs")) and not (tmp_path / "runs").exists()
     assert main(["tasks", hall]) == 0
     assert capsys.readouterr().out.splitlines()[-1] == "    critic spec: none built in for this task; check yours with --model SPEC"
+    # what train warns of a spec, the check warns of too: here a goal no positive edge reaches
+    spec.write_text(yaml.safe_dump({"name": "keys", "subgoals": ["key", "door", "goal"],
+                                    "edges": [["key", "door", "positive"]]}))
+    assert main(["tasks", hall, "--model", str(spec)]) == 0
+    assert "hubsgo: note: model spec 'keys' gives goal (the task's goal) no positive edge" in capsys.readouterr().err
     # the key behind its own door: refused as `hubsgo train` refuses it
     (tmp_path / "hall.txt").write_text("#######\n#A..#k#\n#...D.#\n#...#G#\n#######\n")
     assert main(["tasks", hall, "--model", str(spec)]) == 2
@@ -654,7 +659,7 @@ def test_flags_and_spec_keys_that_would_be_ignored_are_refused_or_noted(capsys, 
                  "--no-progress", *TINY]) == 0
     err = capsys.readouterr().err
     assert "hubsgo: note: model spec 's' names task 'fourroom'; it is used for 'keydoor'" in err
-    assert "hubsgo: note: model spec 's' has graph independent, so its 1 edges are not used" in err
+    assert "hubsgo: note: model spec 's' has graph independent, so its edges (1) are not used" in err
     # a file where the run's folder goes
     (tmp_path / "afile").write_text("x")
     assert main(["train", "keydoor", "--out", str(tmp_path / "afile"), "--steps", "100", "--no-progress"]) == 2

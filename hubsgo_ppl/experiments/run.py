@@ -201,7 +201,7 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
             print(f"hubsgo: note: model spec {spec.name!r} names task {spec.task!r}; it is used for {info.name!r}, "
                   "its sub-goals matched by name", file=sys.stderr)
         if cfg.graph is None and spec.graph == "independent" and spec.edges:
-            print(f"hubsgo: note: model spec {spec.name!r} has graph independent, so its {len(spec.edges)} edges "
+            print(f"hubsgo: note: model spec {spec.name!r} has graph independent, so its edges ({len(spec.edges)}) "
                   "are not used; graph specific uses them", file=sys.stderr)
         if set(spec.subgoals) >= set(names):
             spec = match_subgoals(spec, list(names), source)

@@ -332,6 +332,7 @@ def _args_error(source: str, key: str, err: ValidationError) -> str:
         loc = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in e["loc"])
         msg = {"extra_forbidden": "unknown key; remove it or check its spelling",
                "missing": "required key is missing; add it"}.get(e["type"], e["msg"])
+        msg = msg.removeprefix("Value error, ")          # our own validators' words, without pydantic's prefix
         lines.append(f"{source}: {key}{loc}: {msg}")
     return "\n".join(lines)
 

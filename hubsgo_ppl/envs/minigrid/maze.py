@@ -130,7 +130,7 @@ class MazeEnv(MiniGridEnv):
 
     Args:
         catalogue: path to the task's catalogue YAML (or a loaded :class:`Catalogue`).
-        obs_mode: ``"symbolic"`` or ``"image"``; overrides ``options.obs_mode``.
+        obs_mode: ``"symbolic"``, ``"image"`` or ``"egocentric"``; overrides ``options.obs_mode``.
         max_steps: overrides ``options.max_steps``.
         start: ``"cell"`` or ``"room"``; overrides ``options.start`` (``room``: each episode starts on a
             free cell of the start's room, drawn by the seeded reset, so that the low level meets its
