@@ -688,3 +688,16 @@ def test_a_revision_that_changes_nothing_is_recorded_with_a_note(tiny_run, tmp_p
     shutil.copytree(tiny_run, run)
     assert main(["revise", str(run), "--model", "keydoor-specific", "--steps", "900", "--no-train"]) == 0
     assert "asks for the critic the run already has; it is recorded as revision 1" in capsys.readouterr().err
+
+
+def test_a_users_catalogue_named_like_a_built_in_task_says_which_spec_it_gets(capsys, tmp_path):
+    from hubsgo_ppl.resources import envs_dir
+
+    data = yaml.safe_load((envs_dir() / "keydoor.yaml").read_text())
+    layout = data["options"]["layout"]
+    shutil.copy(envs_dir() / layout, tmp_path / layout)
+    (tmp_path / "mine.yaml").write_text(yaml.safe_dump(data))
+    assert main(["train", str(tmp_path / "mine.yaml"), "--out", str(tmp_path / "run"), "--steps", "100",
+                 "--no-progress", *TINY]) == 0
+    assert ("hubsgo: note: no --model: the built-in spec 'keydoor-specific', named after the catalogue's task "
+            "'keydoor'; pass --model to use your own") in capsys.readouterr().err

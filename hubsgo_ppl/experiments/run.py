@@ -197,12 +197,6 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
         else:
             spec = load_model_spec(model, graph=cfg.graph)
         source = f"model spec {model!r} for task {info.name!r}"
-        if spec.task is not None and spec.task != info.name:
-            print(f"hubsgo: note: model spec {spec.name!r} names task {spec.task!r}; it is used for {info.name!r}, "
-                  "its sub-goals matched by name", file=sys.stderr)
-        if cfg.graph is None and spec.graph == "independent" and spec.edges:
-            print(f"hubsgo: note: model spec {spec.name!r} has graph independent, so its edges ({len(spec.edges)}) "
-                  "are not used; graph specific uses them", file=sys.stderr)
         if set(spec.subgoals) >= set(names):
             spec = match_subgoals(spec, list(names), source)
         else:       # some of the catalogue's sub-goals: the run's candidates are those (envs/subset.py)
@@ -211,6 +205,15 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
             resolved["subgoals"] = list(spec.subgoals)
         resolved["model_spec"] = spec.model_dump(mode="json")
         resolved["model"] = spec.name
+        if cfg.model is None and inherited is None and _is_catalogue(cfg.task):
+            print(f"hubsgo: note: no --model: the built-in spec {model!r}, named after the catalogue's task "
+                  f"{info.name!r}; pass --model to use your own", file=sys.stderr)
+        if spec.task is not None and spec.task != info.name:     # it fits (above); say whose it was
+            print(f"hubsgo: note: model spec {spec.name!r} names task {spec.task!r}; it is used for {info.name!r}, "
+                  "its sub-goals matched by name", file=sys.stderr)
+        if cfg.graph is None and spec.graph == "independent" and spec.edges:
+            print(f"hubsgo: note: model spec {spec.name!r} has graph independent, so its edges ({len(spec.edges)}) "
+                  "are not used; graph specific uses them", file=sys.stderr)
     return resolved
 
 
