@@ -259,5 +259,5 @@ def apply_transfer(agent: Any, plan: TransferPlan) -> dict[str, Any]:
         f = agent.filter
         f.load_state_dict({"critic": f.critic.state_dict(), "mask": f.critic.filtered_set(),
                            "outcomes": torch.zeros(0, len(new_names))})
-    return {"run": str(plan.source), "task": plan.config["task"], "agent": plan.config["agent"],
+    return {"run": str(plan.source.resolve()), "task": plan.config["task"], "agent": plan.config["agent"],
             "env_steps": plan.env_steps, "parts": list(plan.parts), "mapped": mapped}
