@@ -701,3 +701,40 @@ def test_a_users_catalogue_named_like_a_built_in_task_says_which_spec_it_gets(ca
                  "--no-progress", *TINY]) == 0
     assert ("hubsgo: note: no --model: the built-in spec 'keydoor-specific', named after the catalogue's task "
             "'keydoor'; pass --model to use your own") in capsys.readouterr().err
+
+
+def test_resume_restores_config_yaml_and_refuses_to_start_over_a_run_whose_checkpoint_is_lost(tiny_run, tmp_path,
+                                                                                               capsys):
+    run = tmp_path / "run"
+    shutil.copytree(tiny_run, run)       # 600 steps, a checkpoint every 200
+    (run / "config.yaml").unlink()
+    assert main(["train", "keydoor", "--out", str(run), "--resume", "--steps", "900", "--no-progress"]) == 0
+    assert yaml.safe_load((run / "config.yaml").read_text())["hyper"]["steps"] == 900
+    (run / "checkpoint.pt").unlink()
+    rows = (run / "metrics.csv").read_text()
+    capsys.readouterr()
+    assert main(["train", "keydoor", "--out", str(run), "--resume", "--no-progress"]) == 2
+    line = _one_error_line(capsys)
+    assert "checkpoint.pt is missing, though metrics.csv reaches env step" in line and "put the checkpoint back" in line
+    assert (run / "metrics.csv").read_text() == rows          # nothing removed
+
+
+def test_a_run_read_after_its_layout_changed_says_so_rather_than_call_the_checkpoint_damaged(capsys, tmp_path):
+    (tmp_path / "hall.txt").write_text("#######\n#A..#.#\n#.k.D.#\n#...#G#\n#######\n")
+    (tmp_path / "hall.yaml").write_text(yaml.safe_dump({
+        "task": "hall", "family": "minigrid",
+        "options": {"layout": "hall.txt", "legend": {"k": {"type": "key", "color": "red"},
+                                                     "D": {"type": "door", "color": "red", "locked": True}}},
+        "subgoals": [{"name": "key", "kind": "carrying", "args": {"type": "key", "color": "red"}},
+                     {"name": "door", "kind": "door_open", "args": {"color": "red"}},
+                     {"name": "goal", "kind": "goal"}]}))
+    run = tmp_path / "run"
+    assert main(["train", str(tmp_path / "hall.yaml"), "--agent", "hdqn", "--out", str(run), "--steps", "200",
+                 "--no-progress", *TINY]) == 0
+    (tmp_path / "hall.txt").write_text("########\n#A..#..#\n#.k.D..#\n#...#G.#\n########\n")      # a wider grid
+    capsys.readouterr()
+    assert main(["evaluate", str(run), "--episodes", "1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[0].startswith("hubsgo: warning: ") and "has changed since the run recorded it" in err[0]
+    assert err[1].endswith("which has changed since the run recorded it; put the catalogue and its layout back as "
+                           "they were")
