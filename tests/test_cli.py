@@ -142,15 +142,25 @@ def test_a_run_that_cannot_be_built_keeps_an_existing_out_folder(capsys, tmp_pat
     assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]
 
 
-def test_a_user_maze_without_a_spec_asks_for_one_and_trains_with_one(capsys, tmp_path):
-    (tmp_path / "hall.txt").write_text("#######\n#A..#.#\n#.k.D.#\n#...#G#\n#######\n")
-    (tmp_path / "hall.yaml").write_text(yaml.safe_dump({
-        "task": "hall", "family": "minigrid",
-        "options": {"layout": "hall.txt", "legend": {"k": {"type": "key", "color": "red"},
-                                                     "D": {"type": "door", "color": "red", "locked": True}}},
+HALL = "#######\n#A..#.#\n#.k.D.#\n#...#G#\n#######\n"     # a red key and its locked door before the goal
+
+
+def _hall(folder, name="hall", layout=HALL):
+    """A user's maze in ``folder``: ``NAME.txt`` and the catalogue ``NAME.yaml`` (sub-goals key, door,
+    goal); returns the catalogue's path."""
+    (folder / f"{name}.txt").write_text(layout)
+    (folder / f"{name}.yaml").write_text(yaml.safe_dump({
+        "task": name, "family": "minigrid",
+        "options": {"layout": f"{name}.txt", "legend": {"k": {"type": "key", "color": "red"},
+                                                          "D": {"type": "door", "color": "red", "locked": True}}},
         "subgoals": [{"name": "key", "kind": "carrying", "args": {"type": "key", "color": "red"}},
                      {"name": "door", "kind": "door_open", "args": {"color": "red"}},
                      {"name": "goal", "kind": "goal"}]}))
+    return folder / f"{name}.yaml"
+
+
+def test_a_user_maze_without_a_spec_asks_for_one_and_trains_with_one(capsys, tmp_path):
+    _hall(tmp_path)
     out = tmp_path / "run"
     assert main(["train", str(tmp_path / "hall.yaml"), "--out", str(out), "--steps", "100", "--no-progress"]) == 2
     line = _one_error_line(capsys)
@@ -170,14 +180,7 @@ def test_a_run_on_a_user_maze_given_by_a_relative_path_works_from_another_folder
     mazes, elsewhere = tmp_path / "mazes", tmp_path / "elsewhere"
     mazes.mkdir()
     elsewhere.mkdir()
-    (mazes / "hall.txt").write_text("#######\n#A..#.#\n#.k.D.#\n#...#G#\n#######\n")
-    (mazes / "hall.yaml").write_text(yaml.safe_dump({
-        "task": "hall", "family": "minigrid",
-        "options": {"layout": "hall.txt", "legend": {"k": {"type": "key", "color": "red"},
-                                                     "D": {"type": "door", "color": "red", "locked": True}}},
-        "subgoals": [{"name": "key", "kind": "carrying", "args": {"type": "key", "color": "red"}},
-                     {"name": "door", "kind": "door_open", "args": {"color": "red"}},
-                     {"name": "goal", "kind": "goal"}]}))
+    _hall(mazes)
     (mazes / "hall-spec.yaml").write_text(yaml.safe_dump({
         "name": "hall-spec", "subgoals": ["key", "door", "goal"],
         "edges": [["key", "door", "positive"], ["door", "goal", "positive"]]}))
@@ -583,19 +586,8 @@ def test_a_folder_that_cannot_be_written_gets_one_line_naming_the_file(monkeypat
 
 
 def test_a_transfer_to_a_users_maze_without_a_spec_takes_the_source_runs(capsys, tmp_path):
-    def maze(name, rows):
-        (tmp_path / f"{name}.txt").write_text(rows)
-        (tmp_path / f"{name}.yaml").write_text(yaml.safe_dump({
-            "task": name, "family": "minigrid",
-            "options": {"layout": f"{name}.txt", "legend": {"k": {"type": "key", "color": "red"},
-                                                              "D": {"type": "door", "color": "red", "locked": True}}},
-            "subgoals": [{"name": "key", "kind": "carrying", "args": {"type": "key", "color": "red"}},
-                         {"name": "door", "kind": "door_open", "args": {"color": "red"}},
-                         {"name": "goal", "kind": "goal"}]}))
-        return str(tmp_path / f"{name}.yaml")
-
-    hall, moved = maze("hall", "#######\n#A..#.#\n#.k.D.#\n#...#G#\n#######\n"), \
-        maze("hall_moved", "#######\n#Ak.#.#\n#...D.#\n#...#G#\n#######\n")
+    hall = str(_hall(tmp_path))
+    moved = str(_hall(tmp_path, "hall_moved", "#######\n#Ak.#.#\n#...D.#\n#...#G#\n#######\n"))
     (tmp_path / "hall-spec.yaml").write_text(yaml.safe_dump({
         "name": "hall-spec", "subgoals": ["key", "door", "goal"],
         "edges": [["key", "door", "positive"], ["door", "goal", "positive"]]}))
@@ -612,14 +604,7 @@ def test_a_transfer_to_a_users_maze_without_a_spec_takes_the_source_runs(capsys,
 
 
 def test_tasks_checks_a_catalogue_and_a_spec_without_training(capsys, tmp_path):
-    (tmp_path / "hall.txt").write_text("#######\n#A..#.#\n#.k.D.#\n#...#G#\n#######\n")
-    catalogue = {"task": "hall", "family": "minigrid",
-                 "options": {"layout": "hall.txt", "legend": {"k": {"type": "key", "color": "red"},
-                                                              "D": {"type": "door", "color": "red", "locked": True}}},
-                 "subgoals": [{"name": "key", "kind": "carrying", "args": {"type": "key", "color": "red"}},
-                              {"name": "door", "kind": "door_open", "args": {"color": "red"}},
-                              {"name": "goal", "kind": "goal"}]}
-    (tmp_path / "hall.yaml").write_text(yaml.safe_dump(catalogue))
+    _hall(tmp_path)
     spec = tmp_path / "hall-spec.yaml"
     spec.write_text(yaml.safe_dump({"name": "hall-spec", "subgoals": ["key", "door", "goal"],
                                     "edges": [["key", "door", "positive"], ["door", "goal", "positive"]]}))
@@ -720,14 +705,7 @@ def test_resume_restores_config_yaml_and_refuses_to_start_over_a_run_whose_check
 
 
 def test_a_run_read_after_its_layout_changed_says_so_rather_than_call_the_checkpoint_damaged(capsys, tmp_path):
-    (tmp_path / "hall.txt").write_text("#######\n#A..#.#\n#.k.D.#\n#...#G#\n#######\n")
-    (tmp_path / "hall.yaml").write_text(yaml.safe_dump({
-        "task": "hall", "family": "minigrid",
-        "options": {"layout": "hall.txt", "legend": {"k": {"type": "key", "color": "red"},
-                                                     "D": {"type": "door", "color": "red", "locked": True}}},
-        "subgoals": [{"name": "key", "kind": "carrying", "args": {"type": "key", "color": "red"}},
-                     {"name": "door", "kind": "door_open", "args": {"color": "red"}},
-                     {"name": "goal", "kind": "goal"}]}))
+    _hall(tmp_path)
     run = tmp_path / "run"
     assert main(["train", str(tmp_path / "hall.yaml"), "--agent", "hdqn", "--out", str(run), "--steps", "200",
                  "--no-progress", *TINY]) == 0

@@ -37,7 +37,7 @@ import gymnasium as gym
 import numpy as np
 
 from ..experiments.io import atomic_path
-from ..experiments.run import RunError
+from ..experiments.run import RunError, read_config_file
 
 __all__ = ["FrameRecorder", "Recording", "check_renderable", "read_run_config", "record_episode",
            "annotate_frames", "write_gif", "render_episode", "episode_summary", "CURRENT_COLOR", "GHAT_COLOR"]
@@ -52,16 +52,10 @@ CAPTION_FG = (240, 240, 240)
 def read_run_config(run_dir: str | Path) -> dict[str, Any] | None:
     """The resolved config of a run directory from its ``config.yaml`` (cheap: no env, no checkpoint),
     or None when the file is missing or unreadable (the checkpoint's copy is then the one to use)."""
-    import yaml
-
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise RunError(f"{run_dir}: no such run directory; pass the --out folder of `hubsgo train`")
-    try:
-        cfg = yaml.safe_load((run_dir / "config.yaml").read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError):
-        return None
-    return cfg if isinstance(cfg, dict) else None
+    return read_config_file(run_dir)
 
 
 def check_renderable(resolved: dict[str, Any], what: str = "render") -> None:

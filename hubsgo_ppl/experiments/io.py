@@ -43,6 +43,12 @@ class RunFileError(CheckpointError):
     """Another file of a run directory (a CSV log, a JSON table) is damaged; the message names it."""
 
 
+def damaged_log(path: Path, exc: Exception) -> RunFileError:
+    """The error for a CSV log a run appends to that cannot be read as one."""
+    return RunFileError(f"{path}: damaged, not a CSV log ({exc}); move it out of the run directory to go on "
+                        "without its rows")
+
+
 def _create_temp(path: Path, suffix: str) -> Path:
     """A new, empty file next to ``path``, created like ``open()`` would (mode 0666 & ~umask)."""
     for _ in range(100):
@@ -133,8 +139,7 @@ def truncate_csv(path: str | Path, column: str, below: int) -> None:
         with path.open(newline="", encoding="utf-8") as fh:
             table = list(csv.reader(fh))
     except (UnicodeDecodeError, csv.Error) as exc:
-        raise RunFileError(f"{path}: damaged, not a CSV log ({exc}); move it out of the run directory to go "
-                           "on without its rows") from None
+        raise damaged_log(path, exc) from None
     header, rows = (table[0], table[1:]) if table else ([], [])
     if column not in header:
         path.unlink()

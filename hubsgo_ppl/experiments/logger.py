@@ -34,7 +34,7 @@ from typing import Any
 from stable_baselines3.common.logger import KVWriter, TensorBoardOutputFormat, filter_excluded_keys
 from stable_baselines3.common.logger import Logger as SB3Logger
 
-from .io import RunFileError, write_text
+from .io import RunFileError, damaged_log, write_text
 
 __all__ = ["Logger", "CSVOutput", "TensorBoardOutput", "read_csv_rows"]
 
@@ -55,8 +55,7 @@ class CSVOutput(KVWriter):
                 with self.path.open(newline="", encoding="utf-8") as fh:
                     self.fields = next(csv.reader(fh), [])
             except (UnicodeDecodeError, csv.Error) as exc:
-                raise RunFileError(f"{self.path}: damaged, not a CSV log ({exc}); move it out of the run "
-                                   "directory to go on without its rows") from None
+                raise damaged_log(self.path, exc) from None
 
     def write(self, key_values: dict[str, Any], key_excluded: Mapping[str, Any] | int | None = None,
               step: int = 0) -> None:

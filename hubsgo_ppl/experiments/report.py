@@ -115,10 +115,7 @@ def collect(sweep_dir: str | Path) -> list[RunSummary]:
     out = []
     for metrics in sorted(sweep_dir.glob("*/*/seed*/metrics.csv")):
         run = metrics.parent
-        try:
-            rows = read_csv_rows(metrics)
-        except (UnicodeDecodeError, csv.Error) as exc:
-            raise ReportError(f"{metrics}: not a metrics file of `hubsgo train` ({exc})") from None
+        rows = read_csv_rows(metrics)     # a file that is no CSV log: RunFileError, one line
         rows = [r for r in rows if None not in r.values() and "" not in (r.get("return"), r.get("env_steps"))]
         if not rows:        # (a row cut short by a kill mid-write is left out, as --resume cuts it)
             continue

@@ -105,8 +105,7 @@ def _critic_from_config(resolved: dict[str, Any]) -> Any:
 def task_ref(task: str | Path) -> str:
     """How a run's config names its task: a built-in name as given, a user's catalogue by its absolute
     path, so that the run can be evaluated, reviewed, revised and resumed from any folder."""
-    p = Path(task)
-    return str(p.resolve()) if p.suffix in (".yaml", ".yml") else str(task)
+    return str(Path(task).resolve()) if _is_catalogue(task) else str(task)
 
 
 def _is_catalogue(task: str | Path) -> bool:
@@ -168,9 +167,10 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
         if not (cfg.overrides or isinstance(exc, ConfigError)):
             raise
         raise RunError(str(exc)) from None
+    ref = task_ref(cfg.task)
     resolved: dict[str, Any] = {
-        "task": info.name, "task_ref": task_ref(cfg.task), "family": info.family,
-        **({"task_digest": catalogue_digest(task_ref(cfg.task))} if _is_catalogue(cfg.task) else {}),
+        "task": info.name, "task_ref": ref, "family": info.family,
+        **({"task_digest": catalogue_digest(ref)} if _is_catalogue(cfg.task) else {}),
         "agent": cfg.agent, "seed": int(cfg.seed), "hyper": hyper,
         "checkpoint_steps": int(cfg.checkpoint_steps), "history_every": cfg.history_every, "threads": cfg.threads,
         "versions": {"hubsgo_ppl": __version__, "torch": str(torch.__version__), "python": platform.python_version()},
@@ -183,10 +183,11 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
         from ..specs import SpecError, list_model_specs, load_model_spec, match_subgoals
 
         model = cfg.model or f"{info.name}-specific"
+        missing = cfg.model is None and model not in list_model_specs()
         inherited = None
-        if cfg.model is None and model not in list_model_specs() and cfg.init_from is not None:
+        if missing and cfg.init_from is not None:
             inherited = _source_spec(cfg.init_from)     # a user's maze started from another run: that run's spec
-        if cfg.model is None and model not in list_model_specs() and inherited is None:
+        if missing and inherited is None:
             raise SpecError(f"task {info.name!r} has no built-in critic spec {model}: write one (its sub-goals, "
                             "your signed edges, the prior and the likelihood; models/keydoor-specific.yaml is an "
                             "example) and pass it with --model my_spec.yaml")
@@ -218,11 +219,11 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
 
 
 def _source_spec(run_dir: str | Path) -> Any:
-    """The critic spec a run was trained with (its checkpoint's copy), or None where it has none."""
+    """The critic spec a run was trained with, or None where it has none."""
     from ..specs import ModelSpec
 
     try:
-        spec = run_dir_checkpoint(Path(run_dir))["config"].get("model_spec")
+        spec = run_config(run_dir).get("model_spec")
     except (RunError, CheckpointError):
         return None             # the transfer's own checks name what is wrong with that run
     return ModelSpec.model_validate(spec) if isinstance(spec, dict) else None
@@ -283,7 +284,8 @@ def _build(resolved: dict[str, Any]):
     return env, agent
 
 
-def _readable_config(out: Path) -> dict[str, Any] | None:
+def read_config_file(out: Path) -> dict[str, Any] | None:
+    """``out/config.yaml`` as a mapping, or None where it is missing or damaged."""
     import yaml
 
     try:
@@ -297,7 +299,7 @@ def _refuse_lost_checkpoint(out: Path) -> None:
     """A run folder without a checkpoint whose logs go past the step of its second one lost it (a run
     killed in the chunk that crosses the first may log past it unsaved): refuse to start that folder
     afresh, which would remove the logs."""
-    cfg = _readable_config(out) or {}
+    cfg = read_config_file(out) or {}
     every = int(cfg.get("checkpoint_steps", CHECKPOINT_STEPS))
     try:
         rows = read_csv_rows(out / "metrics.csv")
@@ -367,14 +369,9 @@ def _run_checkpoint(path: Path) -> dict[str, Any]:
 def run_config(run_dir: str | Path) -> dict[str, Any]:
     """A run's resolved config: its ``config.yaml``, or the checkpoint's copy where that file is missing
     or damaged."""
-    import yaml
-
     run_dir = Path(run_dir)
-    try:
-        cfg = yaml.safe_load((run_dir / "config.yaml").read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError):
-        cfg = None
-    if isinstance(cfg, dict) and {"task", "task_ref", "agent", "seed"} <= set(cfg):
+    cfg = read_config_file(run_dir)
+    if cfg is not None and {"task", "task_ref", "agent", "seed", "hyper"} <= set(cfg):
         return cfg
     return run_dir_checkpoint(run_dir)["config"]
 
@@ -449,7 +446,7 @@ def check_resume(out: str | Path, task: str, *, agent: str | None = None, seed: 
     out = Path(out)
     if not (out / CHECKPOINT).exists():
         return
-    run = _run_checkpoint(out / CHECKPOINT)["config"]
+    run = run_config(out)       # config.yaml, which matches the checkpoint (else the checkpoint's own copy)
     clash = []
     if task not in (run["task"], run["task_ref"]) and task_ref(task) != run["task_ref"]:
         clash.append(f"task {task} (the run's is {run['task_ref']})")
@@ -509,7 +506,7 @@ def _start(cfg: RunConfig, out: Path, resume: bool):
         elif done >= budget:
             print(f"hubsgo: {out} has finished its budget of {budget:,} env steps; nothing to train (pass --steps "
                   f"above {done} to train on)", file=sys.stderr)
-        on_disk = _readable_config(out)
+        on_disk = read_config_file(out)
         env, agent = _restore(ckpt_path, ckpt, cfg.steps)
         if on_disk != ckpt["config"]:       # config.yaml says what the checkpoint says (a new budget, a lost file)
             write_yaml(out / "config.yaml", ckpt["config"])
@@ -518,7 +515,7 @@ def _start(cfg: RunConfig, out: Path, resume: bool):
     if ckpt_path.exists():
         raise RunError(f"{out} already holds a run; continue it with --resume or choose another --out")
     resolved = resolve(cfg)
-    if resolved["family"] == "minigrid" and Path(str(cfg.task)).suffix in (".yaml", ".yml"):
+    if resolved["family"] == "minigrid" and _is_catalogue(cfg.task):
         from ..envs.minigrid.bfs import check_reachable
 
         never = check_reachable(resolved["task_ref"])     # a maze whose goal cannot be reached: SpecError
