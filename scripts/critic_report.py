@@ -42,6 +42,8 @@ ROUTES = {
     "gallery": [{gap, "yellow_key", "yellow_door", "goal"} for gap in ("gap_north", "gap_south")],
     "moat": [{"green_key", "green_door", "goal"}, {"ford", "goal"}],
     "chain": [{"red_key", "red_door", "blue_key", "blue_door", "goal"}],
+    "forge": [{"purple_key", "purple_door", "red_key", "red_door", "goal"},
+              {"bridge", "grey_door", "red_key", "red_door", "goal"}],
 }
 ROUTES["vault_moved"] = ROUTES["vault"]
 
