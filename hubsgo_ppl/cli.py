@@ -112,7 +112,7 @@ def cmd_revise(args: argparse.Namespace) -> int:
     from .experiments.run import RunConfig, train
 
     run_dir = Path(args.run_dir)
-    r = apply_revision(run_dir, args.model, steps=args.steps)
+    r = apply_revision(run_dir, args.model, steps=args.steps, train_after=not args.no_train)
     print(f"revision {r['revision']} of {run_dir} at env step {r['env_steps']:,} (episode {r['episode']}): "
           f"{r['spec_before']} -> {r['spec_after']}")
     print(f"  sub-goals dropped: {_names(r['subgoals_dropped'])}; added: {_names(r['subgoals_added'])}")
@@ -128,6 +128,12 @@ def cmd_revise(args: argparse.Namespace) -> int:
         print(f"  the critic had not updated yet, so it starts as the revised spec says (every factor from its prior "
               f"and signs); carried over by name: {k['high_outputs']} high-level outputs")
     print(f"  recorded in {run_dir / 'revisions' / format(r['revision'], '03d')} and {run_dir / 'revisions.csv'}")
+    if r.get("finished"):
+        print(f"the run had taken its budget, so it stays finished; {run_dir / 'subgoals.json'} holds the revised "
+              f"critic's G*, read from the same recent successes; to train on: hubsgo train {_run_task(run_dir)} "
+              f"--out {run_dir} --resume --steps TOTAL")
+        print(_fmt_ranking(json.loads((run_dir / "subgoals.json").read_text())))
+        return 0
     if args.no_train:
         print(f"continue with: hubsgo train {_run_task(run_dir)} --out {run_dir} --resume")
         return 0
@@ -312,6 +318,10 @@ def cmd_review(args: argparse.Namespace) -> int:
     print(f"in G*, held by your positive edges, skipped by most successes: {'; '.join(held) or 'none'}")
     needed = [d["name"] for d in r["needed_not_in_g_star"]]
     print(f"achieved by every recent success, not in G*: {', '.join(needed) or 'none'}")
+    links = [f"{c['u']}--{c['v']}" for c in r.get("suggested_links", [])]
+    if links:
+        print(f"G* leaves out the goal every success reached; positive edges that would let it name the route: "
+              f"{'; '.join(links)}")
     signs = [f"{c['u']}--{c['v']} {c['learned']} (J={c['J']:+.2f})" for c in r.get("suggested_signs", [])]
     if signs:
         print(f"edges you left unknown, with the sign the critic learned: {'; '.join(signs)}")

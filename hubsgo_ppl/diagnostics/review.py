@@ -52,10 +52,10 @@ import yaml
 
 from ..experiments.io import RunFileError, write_json, write_text
 from ..experiments.logger import read_csv_rows
-from ..experiments.run import RunError, load_run
+from ..experiments.run import RunError, load_run, task_goals
 
 __all__ = ["review", "compare_couplings", "human_edge_signs", "suggested_drops", "prior_against_successes",
-           "negative_edges_against_successes", "suggested_spec",
+           "negative_edges_against_successes", "suggested_links", "suggested_spec",
            "marginal_trend", "achieved_frequencies", "metrics_summary", "render_markdown", "plot_review_graph", "format_chosen", "DEAD_BAND", "REVIEW_FORMAT"]
 
 REVIEW_FORMAT = 1
@@ -180,6 +180,27 @@ def negative_edges_against_successes(outcomes: Any, names: Sequence[str], human:
     return sorted(rows, key=lambda r: (index[r["u"]], index[r["v"]]))
 
 
+def suggested_links(needed: Sequence[Mapping[str, Any]], goals: Sequence[str],
+                    human: Mapping[frozenset, str]) -> list[dict[str, Any]]:
+    """Positive edges that would let G* name the route the agent takes, where it names none: when G*
+    leaves out a goal that every recent success reached (``needed``: the ``needed_not_in_g_star`` rows of
+    :func:`prior_against_successes`), link to that goal each other sub-goal that every recent success
+    achieved and G* leaves out: ``{"u", "v": the goal, "human": the spec's sign of the pair or None}`` in
+    the order of ``needed``.
+
+    A G* without the goal names no route at all: the spec's edges do not tie what the successes need to
+    each other (a graph without edges, or one whose signs are all unknown), and under a negative field the
+    outcome evidence alone cannot bring a sub-goal in. Where G* holds the goal, nothing is suggested: a
+    sub-goal that the successes pass but the human left unlinked (a cell on the way) stays out, as the
+    human's graph says."""
+    names = [d["name"] for d in needed]
+    goal = next((g for g in goals if g in names), None)
+    if goal is None:
+        return []
+    return [{"u": n, "v": goal, "human": human.get(frozenset((n, goal)))}
+            for n in names if n not in goals and human.get(frozenset((n, goal))) != "positive"]
+
+
 def suggested_spec(r: Mapping[str, Any], spec: Mapping[str, Any], rare: float = 0.5) -> dict[str, Any]:
     """The spec ``spec`` (a run's resolved model spec) with the suggestions of review ``r`` applied, for
     the human to edit and pass to ``hubsgo revise``:
@@ -189,10 +210,14 @@ def suggested_spec(r: Mapping[str, Any], spec: Mapping[str, Any], rare: float = 
       are then the prior's, not evidence);
     - give each flagged edge its learned sign, and each edge left unknown with a learned sign that sign;
     - remove each negative edge whose two sub-goals every recent success achieved, and each
-      positive edge that holds in G* a sub-goal most recent successes skipped.
+      positive edge that holds in G* a sub-goal most recent successes skipped;
+    - where G* leaves out the goal that every recent success reached, add the positive edges of
+      :func:`suggested_links` (what every success achieved, linked to the goal); a graph preset without
+      edges (``independent``) becomes ``specific`` with those links as its only edges (the edges the
+      spec lists acted on nothing under that preset, and stay out).
 
-    A sub-goal every success achieved that G* leaves out needs an edge only the human can choose, so
-    it is left as it is; so is the goal. The name gains ``-reviewed``. At least one sub-goal stays."""
+    Otherwise a sub-goal every success achieved that G* leaves out needs an edge only the human can
+    choose, so it is left as it is. The name gains ``-reviewed``. At least one sub-goal stays."""
     learned = r.get("critic_updates", 1) > 0
     drop = {d["name"] for d in r.get("suggested_drops", []) if learned and d.get("success_frequency") is not None
             and d["success_frequency"] < rare}
@@ -212,7 +237,14 @@ def suggested_spec(r: Mapping[str, Any], spec: Mapping[str, Any], rare: float = 
         e = frozenset((c["u"], c["v"]))
         if e not in seen and not e & drop:
             edges.append([c["u"], c["v"], c["learned"]])
+    links = [c for c in r.get("suggested_links", []) if not {c["u"], c["v"]} & drop]
+    linked = {frozenset((c["u"], c["v"])) for c in links}
+    edges = [e for e in edges if frozenset(e[:2]) not in linked] + [[c["u"], c["v"], "positive"] for c in links]
+    if links and spec.get("graph") == "independent":      # its listed edges acted on nothing: only the links
+        edges = [[c["u"], c["v"], "positive"] for c in links]
     out = {**spec, "name": f"{spec['name']}-reviewed", "subgoals": keep, "edges": edges}
+    if links and spec.get("graph") == "independent":
+        out["graph"] = "specific"
     out["task"] = spec.get("task") or r.get("task")      # a spec written without one names the run's task
     return {k: v for k, v in out.items() if v is not None}
 
@@ -328,6 +360,8 @@ def _review(run_dir: Path, resolved: dict[str, Any], env: Any, agent: Any, thres
     marginals = dict(zip(names, critic.marginals().detach().cpu().numpy().astype(float).tolist()))
     factors = critic.factors()
     human = human_edge_signs(resolved.get("model_spec"), critic.graph.edges)
+    in_graph = {frozenset((u, v)) for u, v, _ in critic.graph.edges}
+    acting = {e: s for e, s in human.items() if e in in_graph}    # a spec's edges that a preset left out act on nothing
     couplings = compare_couplings(factors["pairwise"], human, dead_band)
     spec_only = [{"u": u, "v": v, "human": s} for u, v, s in (resolved.get("model_spec") or {}).get("edges", [])
                  if frozenset((u, v)) not in {frozenset(e) for e in factors["pairwise"]}]
@@ -357,13 +391,15 @@ def _review(run_dir: Path, resolved: dict[str, Any], env: Any, agent: Any, thres
         "suggested_signs": [c for c in couplings if not c["contradicts"] and c["suggestion"]],
         "spec_edges_not_in_graph": spec_only,
         "suggested_drops": suggested_drops(marginals, threshold, achieved["frequency"]),
-        **prior_against_successes(ranking[0]["subgoals"], names, achieved["frequency"], human),
-        "negative_edges_achieved_together": negative_edges_against_successes(outcomes, names, human),
+        **prior_against_successes(ranking[0]["subgoals"], names, achieved["frequency"], acting),
+        "goals": [g for g in task_goals(resolved["task_ref"]) if g in names],
+        "negative_edges_achieved_together": negative_edges_against_successes(outcomes, names, acting),
         "achieved": {"recent_successes": achieved, "metrics": metrics_summary(run_dir / "metrics.csv", names, last)},
         "episode": None,
         "review_dir": str(out),
         "files": {"json": "review.json", "markdown": "review.md", "mrf_graph": "mrf_graph.png"},
     }
+    result["suggested_links"] = suggested_links(result["needed_not_in_g_star"], result["goals"], acting)
     out.mkdir(parents=True, exist_ok=True)
     plot_review_graph(result, out / "mrf_graph.png")
     if resolved.get("family") == "minigrid" and gif:
@@ -492,17 +528,28 @@ def render_markdown(r: dict[str, Any]) -> str:
         changes.append(f"- **edge {c['u']} — {c['v']}**: you said *negative* (one excludes the other), yet "
                        f"{_pct(c['both_frequency'])} of the recent successes achieved both; remove it, or make it "
                        f"positive if the route needs both (an agent may also pass a sub-goal it does not need).")
+    links = {c["u"]: c for c in r.get("suggested_links", [])}
+    goal_out = bool(links) or any(d["name"] in r.get("goals", []) for d in r["needed_not_in_g_star"])
     for d in r["needed_not_in_g_star"]:
         edges = ", ".join(f"{d['name']} — {v}" for v in d["positive_edges"])
         hint = (f"its positive edges ({edges}) are not enough" if edges
                 else "no positive edge links it to the route")
-        changes.append(f"- **every recent success achieved {d['name']}, yet G* leaves it out**: {hint}; add a positive "
-                       f"edge to the sub-goal it goes with, or raise the outcome likelihood's power.")
+        if d["name"] in links:
+            c = links[d["name"]]
+            was = f" (you said *{c['human']}*)" if c["human"] else ""
+            todo = f"link it to {c['v']} by a positive edge{was}"
+        elif goal_out and d["name"] in r.get("goals", []):
+            todo = "G* names no route: the positive edges suggested here tie to it what every success achieved"
+        else:
+            todo = "add a positive edge to the sub-goal it goes with, or raise the outcome likelihood's power"
+        changes.append(f"- **every recent success achieved {d['name']}, yet G* leaves it out**: {hint}; {todo}.")
     lines += changes or [f"None: every learned coupling agrees with your edge signs, and every sub-goal has "
                          f"P(w = 1) >= {r['threshold']:.2f}."]
     if "suggested_spec" in r["files"]:
+        added = ("; edges added only where G* leaves out the goal that every success reached" if r.get("suggested_links")
+                 else "; nothing added")
         lines += ["", "`suggested_spec.yaml`, next to this file, is your spec with these changes applied (sub-goals "
-                  "dropped only where fewer than half of the recent successes achieved them; nothing added): edit "
+                  f"dropped only where fewer than half of the recent successes achieved them{added}): edit "
                   f"it, then `hubsgo revise {r['run_dir']} --model "
                   f"{Path(r.get('review_dir', '.')) / r['files']['suggested_spec']}`."]
 

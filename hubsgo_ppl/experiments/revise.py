@@ -57,7 +57,7 @@ from ..envs import get_task
 from ..envs.subset import catalogue_order, check_subset
 from .io import truncate_csv, write_json, write_text, write_yaml
 from .run import (EPISODE_LOGS, REVISIONS_CSV, RunConfig, RunError, _build, _save,
-                  note_unlinked_goals, plot_run_curve, run_config, run_dir_checkpoint, train,
+                  note_unlinked_goals, plot_run_curve, run_config, run_dir_checkpoint, subgoal_table, train,
                   warn_goals_left_out)
 from .remap import TransferError, revise_agent_state
 
@@ -135,9 +135,13 @@ def _write_revisions_csv(run_dir: Path, upto: int) -> None:
     write_text(run_dir / REVISIONS_CSV, buf.getvalue())
 
 
-def apply_revision(run_dir: str | Path, new_spec: str | Path, steps: int | None = None) -> dict[str, Any]:
+def apply_revision(run_dir: str | Path, new_spec: str | Path, steps: int | None = None,
+                   train_after: bool = True) -> dict[str, Any]:
     """Revise the run's critic spec at its checkpoint (module docstring) without training; returns the
-    revision's record (what revision.json holds)."""
+    revision's record (what revision.json holds). A run that has taken its budget needs ``steps`` above
+    it, unless nothing is to be trained after (``train_after`` False, ``steps`` None): the run then stays
+    finished, and its subgoals.json is rewritten with the revised critic's G*, read from the same recent
+    successes (``record["finished"]``)."""
     run_dir = Path(run_dir)
     ckpt = run_dir_checkpoint(run_dir)
     old = ckpt["config"]
@@ -149,7 +153,8 @@ def apply_revision(run_dir: str | Path, new_spec: str | Path, steps: int | None 
     spec = load_revision_spec(new_spec, old)
     done = int(ckpt["env_steps"])
     total = int(steps) if steps is not None else int(old["hyper"]["steps"])
-    if total <= done:
+    finished = total <= done and steps is None and not train_after
+    if total <= done and not finished:
         raise RunError(f"{run_dir}: the run has already taken {done:,} of {'the' if steps else 'its'} {total:,} env "
                        f"steps; pass --steps TOTAL above {done} to train on after the revision")
     new = copy.deepcopy(old)
@@ -184,7 +189,7 @@ def apply_revision(run_dir: str | Path, new_spec: str | Path, steps: int | None 
                            "high_outputs": kept["high_outputs_kept"]},
                   "new": {"subgoals": kept["subgoals_new"], "edges": kept["edges_new"]},
                   "critic_learned": kept["learned"], "critic_optimizer": kept["critic_optimizer"], "pending_discarded": kept["pending_discarded"],
-                  "outcomes_kept": kept["outcomes_kept"]}
+                  "outcomes_kept": kept["outcomes_kept"], "finished": finished}
         folder = run_dir / REVISIONS_DIR / f"{number:03d}"
         write_yaml(folder / "spec_before.yaml", old["model_spec"])
         write_yaml(folder / "spec_after.yaml", new["model_spec"])
@@ -192,9 +197,13 @@ def apply_revision(run_dir: str | Path, new_spec: str | Path, steps: int | None 
         for name in EPISODE_LOGS:           # as --resume does: the logs end at the checkpoint
             truncate_csv(run_dir / name, "episode", int(ckpt["episodes"]))
         _save(run_dir, new, agent, float(ckpt.get("wall_time", 0.0)))      # the revision takes effect here
+        g_star = subgoal_table(agent.g_star_critic(), list(env.unwrapped.subgoal_names)) if finished else None
     write_yaml(run_dir / "config.yaml", new)
     _write_revisions_csv(run_dir, number)
-    (run_dir / "subgoals.json").unlink(missing_ok=True)     # G* of the old spec; rewritten when the run ends
+    if g_star is not None:      # the run stays ended: its G* is now the revised critic's
+        write_json(run_dir / "subgoals.json", g_star)
+    else:
+        (run_dir / "subgoals.json").unlink(missing_ok=True)     # G* of the old spec; rewritten when the run ends
     plot_run_curve(run_dir, new)
     return record
 
@@ -204,7 +213,7 @@ def revise(run_dir: str | Path, new_spec: str | Path, steps: int | None = None, 
     """Revise the run's critic spec (:func:`apply_revision`) and, with ``train_after``, continue training
     it to ``steps`` (``stop_at``: pause there, as ``train``). Returns ``{"revision": record, "summary":
     train's summary or None}``."""
-    record = apply_revision(run_dir, new_spec, steps)
+    record = apply_revision(run_dir, new_spec, steps, train_after=train_after)
     summary = None
     if train_after:
         task = run_config(run_dir)["task_ref"]

@@ -229,7 +229,7 @@ def _source_spec(run_dir: str | Path) -> Any:
     return ModelSpec.model_validate(spec) if isinstance(spec, dict) else None
 
 
-def _task_goals(task_ref: str) -> list[str]:
+def task_goals(task_ref: str) -> list[str]:
     """The names of the task catalogue's ``goal`` sub-goals."""
     return [d.name for d in get_task(task_ref).catalogue.subgoals if d.kind == "goal"]
 
@@ -237,7 +237,7 @@ def _task_goals(task_ref: str) -> list[str]:
 def warn_goals_left_out(spec_name: str, task_ref: str, subgoals: list[str] | None) -> None:
     """One warning line when a run's candidate set (a spec's ``subgoals``; None: the whole catalogue)
     leaves out the task's goal: the high level can never choose it, so the agent reaches it only by chance."""
-    missing = [g for g in _task_goals(task_ref) if g not in subgoals] if subgoals else []
+    missing = [g for g in task_goals(task_ref) if g not in subgoals] if subgoals else []
     if missing:
         print(f"hubsgo: warning: model spec {spec_name!r} leaves out {', '.join(missing)} (the task's goal): the high "
               "level can never choose it, so the agent reaches it only by chance; add it to subgoals and link the "
@@ -259,7 +259,7 @@ def _unlinked_goals(resolved: dict[str, Any]) -> list[str]:
     if outcome.mismatch_nats > -float(prior.get("field", 0.0)):
         return []
     linked = {end for u, v, sign in spec.get("edges", []) if sign == "positive" for end in (u, v)}
-    return [g for g in _task_goals(resolved["task_ref"]) if g in spec["subgoals"] and g not in linked]
+    return [g for g in task_goals(resolved["task_ref"]) if g in spec["subgoals"] and g not in linked]
 
 
 def note_unlinked_goals(resolved: dict[str, Any]) -> None:

@@ -12,7 +12,7 @@ from hubsgo_ppl.experiments.io import load_checkpoint, save_torch
 from hubsgo_ppl.experiments.logger import read_csv_rows
 from hubsgo_ppl.diagnostics.review import (compare_couplings, format_chosen, human_edge_signs, marginal_trend,
                                            negative_edges_against_successes, prior_against_successes, review,
-                                           suggested_drops, suggested_spec)
+                                           suggested_drops, suggested_links, suggested_spec)
 from hubsgo_ppl.experiments.run import RunConfig, RunError, load_run, train
 
 TINY = ["high.learning_starts=8", "high.batch_size=8", "low.learning_starts=64", "low.batch_size=32",
@@ -380,3 +380,96 @@ def test_drops_before_the_critics_first_update_are_called_its_starting_values(ru
     assert "has not updated" not in (tmp_path / "rv1" / "review.md").read_text()
     assert main(["review", str(learned), "--out", str(tmp_path / "cli1"), "--no-gif", "--threshold", "0.5"]) == 0
     assert "has not updated" not in capsys.readouterr().out
+
+
+def test_suggested_links_tie_to_a_goal_that_g_star_leaves_out_what_every_success_achieved():
+    needed = [{"name": n, "success_frequency": 1.0, "positive_edges": []} for n in ("key", "door", "goal")]
+    human = {frozenset(("door", "goal")): "unknown"}
+    assert suggested_links(needed, ["goal"], human) == [{"u": "key", "v": "goal", "human": None},
+                                                        {"u": "door", "v": "goal", "human": "unknown"}]
+    # a positive edge the human already gave is not suggested again
+    assert suggested_links(needed, ["goal"], {frozenset(("key", "goal")): "positive"}) == [
+        {"u": "door", "v": "goal", "human": None}]
+    # G* holds the goal: a sub-goal the successes pass but the human left unlinked stays out
+    assert suggested_links(needed[:2], ["goal"], {}) == []
+    # a task without a goal sub-goal among the candidates, or no success yet
+    assert suggested_links(needed, [], {}) == [] and suggested_links([], ["goal"], {}) == []
+
+
+def test_the_suggested_spec_links_the_route_when_g_star_leaves_out_the_goal():
+    spec = {"name": "toy", "task": "keydoor", "graph": "independent", "prior": {"name": "ising"},
+            "subgoals": ["key", "door", "other", "goal"], "edges": [["key", "other", "negative"]]}
+    links = [{"u": "key", "v": "goal", "human": None}, {"u": "door", "v": "goal", "human": None}]
+    r = {"critic_updates": 5, "suggested_drops": [{"name": "other", "success_frequency": 0.0}],
+         "suggested_links": links}
+    new = suggested_spec(r, spec)
+    # the independent preset would ignore edges, so the graph becomes specific, with the links as its
+    # only edges: the edge the spec listed acted on nothing under that preset
+    assert new["graph"] == "specific" and new["subgoals"] == ["key", "door", "goal"]
+    assert new["edges"] == [["key", "goal", "positive"], ["door", "goal", "positive"]]
+    # on a fully connected graph a listed unknown pair takes the positive sign, once
+    full = {**spec, "graph": "fully_connected", "edges": [["door", "goal", "unknown"], ["key", "other", "negative"]]}
+    new = suggested_spec({**r, "suggested_drops": [], "suggested_links": [{**links[0]}, {**links[1], "human": "unknown"}]},
+                         full)
+    assert new["graph"] == "fully_connected"
+    assert new["edges"] == [["key", "other", "negative"], ["key", "goal", "positive"], ["door", "goal", "positive"]]
+
+
+def test_the_suggested_links_move_the_exact_posterior_mode_from_the_empty_set_to_the_route():
+    """Enumeration of all 2^5 sets: under the shipped Ising prior (strength 3, field -2) without edges,
+    successes that all took {blue_key, blue_door, goal}, read at the outcome likelihood's settled power,
+    leave the posterior's mode empty (1.56 nats of evidence per sub-goal against a field of 2); with the
+    review's two links to the goal the mode is that route, by a margin of at least 1 nat."""
+    from hubsgo_ppl.graph import SubgoalGraph
+    from hubsgo_ppl.infer.likelihoods import OutcomeLikelihood
+    from hubsgo_ppl.infer.priors import IsingPrior
+
+    names = ["yellow_key", "yellow_door", "blue_key", "blue_door", "goal"]
+    route = torch.tensor([0.0, 0.0, 1.0, 1.0, 1.0])
+    lik = OutcomeLikelihood()
+    states = torch.tensor([[(k >> i) & 1 for i in range(5)] for k in range(32)], dtype=torch.float32)
+    evidence = lik.log_likelihood(states, route.expand(20, 5)) * lik.settled_scale()
+
+    def posterior(edges):
+        prior = IsingPrior(SubgoalGraph(names, edges), strength=3.0, field=-2.0)
+        logp = prior.distribution().log_prob(states) + evidence
+        return logp - torch.logsumexp(logp, 0)
+
+    before = posterior([])
+    assert torch.equal(states[before.argmax()], torch.zeros(5))
+    after = posterior([("blue_key", "goal", 1), ("blue_door", "goal", 1)])
+    top2 = after.topk(2)
+    assert torch.equal(states[top2.indices[0]], route)
+    assert float(top2.values[0] - top2.values[1]) > 1.0
+    # the route's marginals under the suggestion, exact: each sub-goal of the route above 0.8
+    marg = (after.exp().unsqueeze(-1) * states).sum(0)
+    assert (marg[2:] > 0.8).all() and (marg[:2] < 0.2).all(), marg
+
+
+def test_review_and_revise_of_a_finished_run_without_edges_name_the_route(tmp_path, capsys):
+    """A finished run whose critic has no edges: G* is empty though every success took the blue route.
+    The review suggests linking the route to the goal; `hubsgo revise --no-train` keeps the run finished
+    and rewrites subgoals.json with the revised critic's G*, read from the same successes."""
+    run = tmp_path / "independent"
+    train(RunConfig(task="keydoor", agent="hubsgo", graph="independent", steps=400, seed=3, overrides=TINY), run,
+          progress=False)
+    names = list(load_run(run)[2].filter.critic.names)
+    blue = [[1 if n in ("blue_key", "blue_door", "goal") else 0 for n in names]] * 20
+    _edit_critic(run, theta={i: -2.0 for i in range(len(names))}, outcomes=blue)
+    ckpt = load_checkpoint(run / "checkpoint.pt")
+    ckpt["agent"]["settled_step"] = int(ckpt["env_steps"])        # read G* as a settled agent's
+    save_torch(run / "checkpoint.pt", ckpt)
+    r = review(run, gif=False)
+    assert r["g_star"]["subgoals"] == [] and r["goals"] == ["goal"]
+    assert [(c["u"], c["v"]) for c in r["suggested_links"]] == [("blue_key", "goal"), ("blue_door", "goal")]
+    assert "link it to goal by a positive edge" in (run / "review" / "review.md").read_text()
+    spec = run / "review" / "suggested_spec.yaml"
+    assert main(["revise", str(run), "--model", str(spec), "--no-train"]) == 0
+    out = capsys.readouterr().out
+    assert "stays finished" in out
+    g_star = json.loads((run / "subgoals.json").read_text())["ranking"][0]
+    assert g_star["subgoals"] == ["blue_key", "blue_door", "goal"] and g_star["prob"] > 0.5, g_star
+    assert load_checkpoint(run / "checkpoint.pt")["env_steps"] == ckpt["env_steps"]
+    # training on needs a budget above the steps taken, as before
+    assert main(["revise", str(run), "--model", str(spec), "--no-progress"]) == 2
+    assert "pass --steps TOTAL above" in capsys.readouterr().err
