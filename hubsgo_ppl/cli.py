@@ -42,8 +42,9 @@ def _fmt_ranking(table: dict[str, Any]) -> str:
     lines.append("marginals P(w=1): " + ", ".join(f"{n}={p:.2f}" for n, p in table["marginals"].items()))
     if table["ranking"] and not table["ranking"][0]["subgoals"]:
         lines.append("the most probable set is empty: no sub-goal's evidence outweighs the prior's pull towards "
-                     "small sets; `hubsgo review RUN` lists what the recent successes achieved, and positive edges "
-                     "in the spec let those sub-goals in")
+                     "small sets; positive edges in the spec let in what the successes achieve: `hubsgo review RUN` "
+                     "suggests them in RUN/review/suggested_spec.yaml, and `hubsgo revise RUN --model "
+                     "RUN/review/suggested_spec.yaml --no-train` reads G* again under them")
     return "\n".join(lines)
 
 
