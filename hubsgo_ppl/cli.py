@@ -337,8 +337,12 @@ def cmd_review(args: argparse.Namespace) -> int:
     for kind, name in r["files"].items():
         print(f"{kind}: {out / name}")
     if "suggested_spec" in r["files"]:
+        from .diagnostics.review import revise_flags
+
+        finished = (" (the run has taken its budget: --no-train reads G* again under the revised spec; --steps "
+                    "TOTAL trains on)" if revise_flags(r) else "")
         print(f"to revise: edit {out / r['files']['suggested_spec']}, then "
-              f"`hubsgo revise {r['run_dir']} --model {out / r['files']['suggested_spec']}`")
+              f"`hubsgo revise {r['run_dir']} --model {out / r['files']['suggested_spec']}{revise_flags(r)}`{finished}")
     return 0
 
 

@@ -249,6 +249,13 @@ def suggested_spec(r: Mapping[str, Any], spec: Mapping[str, Any], rare: float = 
     return {k: v for k, v in out.items() if v is not None}
 
 
+def revise_flags(r: Mapping[str, Any]) -> str:
+    """What the suggested ``hubsgo revise`` command needs after its spec: `` --no-train`` for a run that
+    has taken its budget (it stays finished, and G* is read again under the revised spec; ``--steps
+    TOTAL`` would train on), nothing otherwise."""
+    return " --no-train" if "steps" in r and r["env_steps"] >= r["steps"] else ""
+
+
 def _previous_review(path: Path, names: list[str]) -> dict[str, Any] | None:
     try:
         prev = json.loads(path.read_text())
@@ -373,6 +380,8 @@ def _review(run_dir: Path, resolved: dict[str, Any], env: Any, agent: Any, thres
         "format": REVIEW_FORMAT, "run_dir": str(run_dir), "task": resolved.get("task"),
         "agent": resolved.get("agent"), "model": resolved.get("model"), "graph": (resolved.get("model_spec") or {}).get("graph"),
         "seed": resolved.get("seed"), "env_steps": int(agent.env_steps), "episodes": int(agent.episodes),
+        # the run's budget: a run that has taken it is revised with --no-train (or trained on with --steps)
+        "steps": int(resolved["hyper"]["steps"]),
         # the env step at which the agent settled (loop.settle_at; None: not yet), after which G* and the
         # marginals here come from the critic refitted on the recent successes at the likelihood's settled power
         "settled_step": getattr(agent, "settled_step", None),
@@ -414,7 +423,7 @@ def _review(run_dir: Path, resolved: dict[str, Any], env: Any, agent: Any, thres
     if resolved.get("model_spec"):
         head = (f"# {resolved['model_spec'].get('name')} with the suggestions of the review of {run_dir} at env step "
                 f"{result['env_steps']:,} applied (review.md lists them).\n# Edit it, then: hubsgo revise {run_dir} "
-                f"--model THIS_FILE\n")
+                f"--model THIS_FILE{revise_flags(result)}\n")
         body = yaml.safe_dump(suggested_spec(result, resolved["model_spec"]), sort_keys=False, default_flow_style=None)
         write_text(out / "suggested_spec.yaml", head + body)
         result["files"]["suggested_spec"] = "suggested_spec.yaml"
@@ -551,7 +560,7 @@ def render_markdown(r: dict[str, Any]) -> str:
         lines += ["", "`suggested_spec.yaml`, next to this file, is your spec with these changes applied (sub-goals "
                   f"dropped only where fewer than half of the recent successes achieved them{added}): edit "
                   f"it, then `hubsgo revise {r['run_dir']} --model "
-                  f"{Path(r.get('review_dir', '.')) / r['files']['suggested_spec']}`."]
+                  f"{Path(r.get('review_dir', '.')) / r['files']['suggested_spec']}{revise_flags(r)}`."]
 
     lines += ["", f"## G*: the most probable sub-goal sets ({r['num_samples']:,} critic samples)", "",
               "| rank | P(sample) | P(exact) | sub-goals |", "|---:|---:|---:|---|"]

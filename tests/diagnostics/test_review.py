@@ -462,7 +462,9 @@ def test_review_and_revise_of_a_finished_run_without_edges_name_the_route(tmp_pa
     r = review(run, gif=False)
     assert r["g_star"]["subgoals"] == [] and r["goals"] == ["goal"]
     assert [(c["u"], c["v"]) for c in r["suggested_links"]] == [("blue_key", "goal"), ("blue_door", "goal")]
-    assert "link it to goal by a positive edge" in (run / "review" / "review.md").read_text()
+    md = (run / "review" / "review.md").read_text()
+    assert "link it to goal by a positive edge" in md
+    assert "suggested_spec.yaml --no-train`" in md       # the run has taken its budget
     spec = run / "review" / "suggested_spec.yaml"
     assert main(["revise", str(run), "--model", str(spec), "--no-train"]) == 0
     out = capsys.readouterr().out
