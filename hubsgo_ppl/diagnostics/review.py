@@ -180,25 +180,30 @@ def negative_edges_against_successes(outcomes: Any, names: Sequence[str], human:
     return sorted(rows, key=lambda r: (index[r["u"]], index[r["v"]]))
 
 
-def suggested_links(needed: Sequence[Mapping[str, Any]], goals: Sequence[str],
-                    human: Mapping[frozenset, str]) -> list[dict[str, Any]]:
-    """Positive edges that would let G* name the route the agent takes, where it names none: when G*
-    leaves out a goal that every recent success reached (``needed``: the ``needed_not_in_g_star`` rows of
-    :func:`prior_against_successes`), link to that goal each other sub-goal that every recent success
-    achieved and G* leaves out: ``{"u", "v": the goal, "human": the spec's sign of the pair or None}`` in
-    the order of ``needed``.
+def suggested_links(top: Sequence[str], names: Sequence[str], achieved: Mapping[str, float] | None,
+                    goals: Sequence[str], human: Mapping[frozenset, str], rare: float = 0.5) -> list[dict[str, Any]]:
+    """Positive edges that would let G* name the route the agent takes, where G* (``top``) leaves out a
+    goal that every recent success reached: link to that goal each other sub-goal that at least ``rare``
+    of the recent successes achieved (``achieved``: their frequencies; None without successes) and that
+    has no positive edge to it yet: ``{"u", "v": the goal, "human": the spec's sign of the pair or None,
+    "success_frequency"}`` in the order of ``names``.
 
-    A G* without the goal names no route at all: the spec's edges do not tie what the successes need to
-    each other (a graph without edges, or one whose signs are all unknown), and under a negative field the
-    outcome evidence alone cannot bring a sub-goal in. Where G* holds the goal, nothing is suggested: a
-    sub-goal that the successes pass but the human left unlinked (a cell on the way) stays out, as the
-    human's graph says."""
-    names = [d["name"] for d in needed]
-    goal = next((g for g in goals if g in names), None)
+    A G* without the goal names no route: the spec's edges do not tie what the successes need to the
+    goal (a graph without edges, one whose signs are all unknown, or a goal left unlinked), and under a
+    negative field the outcome evidence alone cannot bring a sub-goal in. At least half of the
+    successes, as for the drops (:func:`suggested_spec` drops what fewer than half achieved): where the
+    successes split between two routes, the more frequent one is linked. Where G* holds the goal,
+    nothing is suggested: a sub-goal that the successes pass but the human left unlinked (a cell on the
+    way) stays out, as the human's graph says."""
+    if achieved is None:
+        return []
+    chosen = set(top)
+    goal = next((g for g in goals if g not in chosen and float(achieved.get(g, 0.0)) >= 1.0), None)
     if goal is None:
         return []
-    return [{"u": n, "v": goal, "human": human.get(frozenset((n, goal)))}
-            for n in names if n not in goals and human.get(frozenset((n, goal))) != "positive"]
+    return [{"u": n, "v": goal, "human": human.get(frozenset((n, goal))), "success_frequency": float(achieved[n])}
+            for n in names if n not in goals and float(achieved.get(n, 0.0)) >= rare
+            and human.get(frozenset((n, goal))) != "positive"]
 
 
 def suggested_spec(r: Mapping[str, Any], spec: Mapping[str, Any], rare: float = 0.5) -> dict[str, Any]:
@@ -212,7 +217,7 @@ def suggested_spec(r: Mapping[str, Any], spec: Mapping[str, Any], rare: float = 
     - remove each negative edge whose two sub-goals every recent success achieved, and each
       positive edge that holds in G* a sub-goal most recent successes skipped;
     - where G* leaves out the goal that every recent success reached, add the positive edges of
-      :func:`suggested_links` (what every success achieved, linked to the goal); a graph preset without
+      :func:`suggested_links` (what most successes achieved, linked to the goal); a graph preset without
       edges (``independent``) becomes ``specific`` with those links as its only edges (the edges the
       spec lists acted on nothing under that preset, and stay out).
 
@@ -408,7 +413,8 @@ def _review(run_dir: Path, resolved: dict[str, Any], env: Any, agent: Any, thres
         "review_dir": str(out),
         "files": {"json": "review.json", "markdown": "review.md", "mrf_graph": "mrf_graph.png"},
     }
-    result["suggested_links"] = suggested_links(result["needed_not_in_g_star"], result["goals"], acting)
+    result["suggested_links"] = suggested_links(ranking[0]["subgoals"], names, achieved["frequency"],
+                                                result["goals"], acting)
     out.mkdir(parents=True, exist_ok=True)
     plot_review_graph(result, out / "mrf_graph.png")
     if resolved.get("family") == "minigrid" and gif:
@@ -537,25 +543,25 @@ def render_markdown(r: dict[str, Any]) -> str:
         changes.append(f"- **edge {c['u']} — {c['v']}**: you said *negative* (one excludes the other), yet "
                        f"{_pct(c['both_frequency'])} of the recent successes achieved both; remove it, or make it "
                        f"positive if the route needs both (an agent may also pass a sub-goal it does not need).")
-    links = {c["u"]: c for c in r.get("suggested_links", [])}
-    goal_out = bool(links) or any(d["name"] in r.get("goals", []) for d in r["needed_not_in_g_star"])
+    links = r.get("suggested_links", [])
+    linked = {c["u"] for c in links} | {c["v"] for c in links}
     for d in r["needed_not_in_g_star"]:
+        if d["name"] in linked:
+            continue            # the suggested links below say what to do
         edges = ", ".join(f"{d['name']} — {v}" for v in d["positive_edges"])
         hint = (f"its positive edges ({edges}) are not enough" if edges
                 else "no positive edge links it to the route")
-        if d["name"] in links:
-            c = links[d["name"]]
-            was = f" (you said *{c['human']}*)" if c["human"] else ""
-            todo = f"link it to {c['v']} by a positive edge{was}"
-        elif goal_out and d["name"] in r.get("goals", []):
-            todo = "G* names no route: the positive edges suggested here tie to it what every success achieved"
-        else:
-            todo = "add a positive edge to the sub-goal it goes with, or raise the outcome likelihood's power"
-        changes.append(f"- **every recent success achieved {d['name']}, yet G* leaves it out**: {hint}; {todo}.")
+        changes.append(f"- **every recent success achieved {d['name']}, yet G* leaves it out**: {hint}; add a positive "
+                       f"edge to the sub-goal it goes with, or raise the outcome likelihood's power.")
+    for c in links:
+        was = f"; you said *{c['human']}*" if c["human"] else ""
+        changes.append(f"- **link {c['u']} — {c['v']} (positive)**: G* leaves out {c['v']}, which every recent "
+                       f"success reached, so it names no route; {_pct(c['success_frequency'])} of those successes "
+                       f"achieved {c['u']}{was}.")
     lines += changes or [f"None: every learned coupling agrees with your edge signs, and every sub-goal has "
                          f"P(w = 1) >= {r['threshold']:.2f}."]
     if "suggested_spec" in r["files"]:
-        added = ("; edges added only where G* leaves out the goal that every success reached" if r.get("suggested_links")
+        added = ("; positive edges added to the goal that G* leaves out" if r.get("suggested_links")
                  else "; nothing added")
         lines += ["", "`suggested_spec.yaml`, next to this file, is your spec with these changes applied (sub-goals "
                   f"dropped only where fewer than half of the recent successes achieved them{added}): edit "

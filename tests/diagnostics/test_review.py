@@ -382,18 +382,22 @@ def test_drops_before_the_critics_first_update_are_called_its_starting_values(ru
     assert "has not updated" not in capsys.readouterr().out
 
 
-def test_suggested_links_tie_to_a_goal_that_g_star_leaves_out_what_every_success_achieved():
-    needed = [{"name": n, "success_frequency": 1.0, "positive_edges": []} for n in ("key", "door", "goal")]
+def test_suggested_links_tie_to_a_goal_that_g_star_leaves_out_what_most_successes_achieved():
+    names = ["key", "door", "other", "cell", "goal"]
+    freq = {"key": 1.0, "door": 0.5, "other": 0.45, "cell": 1.0, "goal": 1.0}
     human = {frozenset(("door", "goal")): "unknown"}
-    assert suggested_links(needed, ["goal"], human) == [{"u": "key", "v": "goal", "human": None},
-                                                        {"u": "door", "v": "goal", "human": "unknown"}]
-    # a positive edge the human already gave is not suggested again
-    assert suggested_links(needed, ["goal"], {frozenset(("key", "goal")): "positive"}) == [
-        {"u": "door", "v": "goal", "human": None}]
-    # G* holds the goal: a sub-goal the successes pass but the human left unlinked stays out
-    assert suggested_links(needed[:2], ["goal"], {}) == []
-    # a task without a goal sub-goal among the candidates, or no success yet
-    assert suggested_links(needed, [], {}) == [] and suggested_links([], ["goal"], {}) == []
+    assert suggested_links([], names, freq, ["goal"], human) == [
+        {"u": "key", "v": "goal", "human": None, "success_frequency": 1.0},
+        {"u": "door", "v": "goal", "human": "unknown", "success_frequency": 0.5},
+        {"u": "cell", "v": "goal", "human": None, "success_frequency": 1.0}]
+    # a positive edge the human already gave is not suggested again; a sub-goal in G* is linked too
+    assert [c["u"] for c in suggested_links(["key"], names, freq, ["goal"], {frozenset(("cell", "goal")): "positive"})
+            ] == ["key", "door"]
+    # G* holds the goal: a sub-goal the successes pass but the human left unlinked (the cell) stays out
+    assert suggested_links(["key", "goal"], names, freq, ["goal"], {}) == []
+    # a goal that not every success reached, a task without a goal sub-goal, or no success yet
+    assert suggested_links([], names, {**freq, "goal": 0.95}, ["goal"], {}) == []
+    assert suggested_links([], names, freq, [], {}) == [] and suggested_links([], names, None, ["goal"], {}) == []
 
 
 def test_the_suggested_spec_links_the_route_when_g_star_leaves_out_the_goal():
@@ -463,7 +467,7 @@ def test_review_and_revise_of_a_finished_run_without_edges_name_the_route(tmp_pa
     assert r["g_star"]["subgoals"] == [] and r["goals"] == ["goal"]
     assert [(c["u"], c["v"]) for c in r["suggested_links"]] == [("blue_key", "goal"), ("blue_door", "goal")]
     md = (run / "review" / "review.md").read_text()
-    assert "link it to goal by a positive edge" in md
+    assert "**link blue_key — goal (positive)**: G* leaves out goal, which every recent success reached" in md
     assert "suggested_spec.yaml --no-train`" in md       # the run has taken its budget
     spec = run / "review" / "suggested_spec.yaml"
     assert main(["revise", str(run), "--model", str(spec), "--no-train"]) == 0
