@@ -83,7 +83,7 @@ def main() -> None:
             print(f"| {t} ({var_dir.name}) | {len(rows)} | {ok_b}/{len(rows)} | {ok_a}/{len(rows)} | "
                   f"{_ms([r['p_before'] for _, r in rows])} | {_ms([r['p_after'] for _, r in rows])} | "
                   + "; ".join(f"{k} {v}" for k, v in sets.items()) + " |")
-            detail += [f"- {t} {seed}: before {{{', '.join(sorted(r['before']))}}} {r['p_before']:.3f}; suggested "
+            detail += [f"- {t} {seed}: before {{{', '.join(sorted(r['before']))}}} {r['p_before']:.3f}; links suggested "
                        f"{', '.join(r['links']) or 'nothing'}; after {{{', '.join(sorted(r['after']))}}} "
                        f"{r['p_after']:.3f}" for seed, r in rows]
     print()

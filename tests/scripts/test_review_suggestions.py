@@ -47,7 +47,7 @@ def test_a_run_without_edges_names_the_route_after_the_suggested_revision(tmp_pa
     review_suggestions.main()
     out = capsys.readouterr().out
     assert "| keydoor (hubsgo-independent) | 1 | 0/1 | 1/1 |" in out, out
-    assert "suggested blue_key--goal, blue_door--goal; after {blue_door, blue_key, goal}" in out
+    assert "links suggested blue_key--goal, blue_door--goal; after {blue_door, blue_key, goal}" in out
     copy = tmp_path / "sweep_reviewed" / "keydoor" / "hubsgo-independent" / "seed0"
     assert (copy / "revisions.csv").exists() and not (run / "revisions.csv").exists()   # the sweep's run untouched
     # a second pass reads the revised copy instead of revising it again
