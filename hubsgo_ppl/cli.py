@@ -110,9 +110,12 @@ def _names(items: list[str]) -> str:
 
 def cmd_revise(args: argparse.Namespace) -> int:
     from .experiments.revise import apply_revision
-    from .experiments.run import RunConfig, train
+    from .experiments.run import RunConfig, RunError, train
 
     run_dir = Path(args.run_dir)
+    if args.no_train and args.stop_at is not None:
+        raise RunError("--stop-at pauses the training after the revision, and --no-train trains nothing; give one "
+                       "of them")
     r = apply_revision(run_dir, args.model, steps=args.steps, train_after=not args.no_train)
     print(f"revision {r['revision']} of {run_dir} at env step {r['env_steps']:,} (episode {r['episode']}): "
           f"{r['spec_before']} -> {r['spec_after']}")

@@ -668,6 +668,16 @@ def test_diagnose_revise_and_init_from_bad_values_get_one_line(tiny_run, tmp_pat
     assert line.endswith("; start from another run, or train without --init-from")
 
 
+def test_revise_refuses_stop_at_with_no_train_and_leaves_the_run_as_it_was(tiny_run, tmp_path, capsys):
+    run = tmp_path / "run"
+    shutil.copytree(tiny_run, run)
+    ckpt = (run / "checkpoint.pt").read_bytes()
+    assert main(["revise", str(run), "--model", "keydoor-specific", "--steps", "900", "--no-train",
+                 "--stop-at", "700"]) == 2
+    assert "--stop-at pauses the training after the revision, and --no-train trains nothing" in _one_error_line(capsys)
+    assert (run / "checkpoint.pt").read_bytes() == ckpt and not (run / "revisions").exists()
+
+
 def test_a_revision_that_changes_nothing_is_recorded_with_a_note(tiny_run, tmp_path, capsys):
     run = tmp_path / "run"
     shutil.copytree(tiny_run, run)
