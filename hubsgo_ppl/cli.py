@@ -220,7 +220,7 @@ def _check_task(name: str, info: Any, model: str | None) -> None:
     from .experiments.run import RunConfig, resolve
 
     if info.family == "minigrid":
-        from .envs.minigrid.bfs import check_reachable, optimal_steps
+        from .envs.minigrid.bfs import check_reachable, optimal_steps_range
 
         never = check_reachable(name)       # a goal no sequence reaches: SpecError
         if never is None:
@@ -228,8 +228,10 @@ def _check_task(name: str, info: Any, model: str | None) -> None:
         elif never:
             print(f"    reachability: WARNING: no reachable state achieves {', '.join(never)}")
         else:
-            print(f"    reachability: the goal and every sub-goal can be reached; "
-                  f"shortest solution {optimal_steps(name)} steps")
+            low, high = optimal_steps_range(name)
+            shortest = (f"{low} steps" if low == high else
+                        f"{low}-{high} steps, by the start direction (drawn at random each episode)")
+            print(f"    reachability: the goal and every sub-goal can be reached; shortest solution {shortest}")
     from .specs import list_model_specs
 
     if model is None and f"{info.name}-specific" not in list_model_specs():

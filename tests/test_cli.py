@@ -603,6 +603,19 @@ def test_a_transfer_to_a_users_maze_without_a_spec_takes_the_source_runs(capsys,
     assert cfg["model"] == "hall-spec" and cfg["init_from"]["parts"] == ["critic", "high", "low"]
 
 
+def test_tasks_gives_the_range_of_shortest_solutions_where_the_start_direction_is_random(capsys):
+    """FourRoom draws its start direction each episode: the shortest solution depends on it (23 steps
+    facing two of the ways, 24 the other two), and the check reports both ends instead of failing."""
+    from hubsgo_ppl.envs.minigrid.bfs import optimal_steps, optimal_steps_range
+
+    assert sorted(optimal_steps("fourroom", start_dir=d) for d in range(4)) == [23, 23, 24, 24]
+    assert optimal_steps_range("fourroom") == (23, 24) and optimal_steps_range("keydoor") == (19, 19)
+    assert main(["tasks", "fourroom_incorrect", "--model", "fourroom_incorrect-believed"]) == 0
+    out = capsys.readouterr().out
+    assert ("    reachability: the goal and every sub-goal can be reached; shortest solution 23-24 steps, by the start "
+            "direction (drawn at random each episode)") in out.splitlines()
+
+
 def test_tasks_checks_a_catalogue_and_a_spec_without_training(capsys, tmp_path):
     _hall(tmp_path)
     spec = tmp_path / "hall-spec.yaml"

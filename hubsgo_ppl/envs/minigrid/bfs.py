@@ -224,6 +224,17 @@ def optimal_steps(source: Any, start_dir: int | None = None) -> int:
     return len(plan(source, start_dir=start_dir))
 
 
+def optimal_steps_range(source: Any) -> tuple[int, int]:
+    """Fewest steps to the goal from the start, over every start direction the task can draw: ``(fewest,
+    most)``, equal where the start direction is fixed."""
+    _, starts, taken = _resolve(source, None)
+    if len(starts) == 1:
+        n = optimal_steps(source)
+        return n, n
+    steps = [optimal_steps(source, start_dir=d) for d in range(4)]
+    return min(steps), max(steps)
+
+
 def optimal_return(source: Any, start_dir: int | None = None) -> float:
     """Best achievable episode return, ``1 - 0.9 * (steps_taken + steps) / max_steps`` (0 if the goal
     cannot be reached in time). For a random start direction (and no ``start_dir``) it is the mean
