@@ -69,19 +69,23 @@ def run_stats(run: Path, budget: int, pause: int | None = None) -> dict[str, flo
 
 
 def corrected_spec(review: dict[str, Any], spec: dict[str, Any], path: Path, keep_linked: bool = False,
-                   unlink_held: bool = False, unlink_together: bool = False) -> Path:
+                   unlink_held: bool = False, unlink_together: bool = False, drop_held: bool = False) -> Path:
     """The human's revision of ``spec`` after ``review`` (module docstring), written to ``path``.
     ``keep_linked``: a human who drops only suggested sub-goals that no edge of the spec joins to
     another sub-goal (the route not taken stays; sub-goals the human related to nothing go).
     ``unlink_held``: a human who also removes the positive edges that hold a sub-goal in G* though
     most recent successes skipped it (``review["held_by_edges"]``); the sub-goal stays a candidate.
     ``unlink_together``: a human who also removes the negative edges whose two sub-goals most recent
-    successes both achieved (``review["negative_edges_achieved_together"]``)."""
+    successes both achieved (``review["negative_edges_achieved_together"]``).
+    ``drop_held``: a human who drops the sub-goals that the review says positive edges hold in G*
+    though most recent successes skipped them (``review["held_by_edges"]``), with their edges."""
 
     linked = {n for u, v, _ in spec["edges"] for n in (u, v)}
     drop = {d["name"] for d in review["suggested_drops"]
             if (d["success_frequency"] is None or d["success_frequency"] < 0.5)
             and not (keep_linked and d["name"] in linked)}
+    if drop_held:
+        drop |= {d["name"] for d in review.get("held_by_edges", [])}
     keep = [n for n in spec["subgoals"] if n not in drop]
     if not keep:                                    # a spec lists at least one sub-goal
         keep, drop = list(spec["subgoals"]), set()
@@ -112,7 +116,8 @@ def g_star(run: Path, task: str) -> dict[str, float]:
 
 
 def one(task: str, seed: int, out: Path, steps: int | None, overrides: list[str], threshold: float,
-        keep_linked: bool = False, unlink_held: bool = False, unlink_together: bool = False) -> list[dict]:
+        keep_linked: bool = False, unlink_held: bool = False, unlink_together: bool = False,
+        model: str | None = None, drop_held: bool = False) -> list[dict]:
     """The three arms of one (task, seed); returns one result row per arm."""
     import torch
     import yaml
@@ -137,12 +142,13 @@ def one(task: str, seed: int, out: Path, steps: int | None, overrides: list[str]
     if not (finished(runs["revised"]) and finished(runs["unrevised"]) and spec_path.exists()):
         for arm in ("revised", "unrevised"):
             shutil.rmtree(runs[arm], ignore_errors=True)
-        cfg = RunConfig(task=task, seed=seed, steps=steps, overrides=overrides)
+        cfg = RunConfig(task=task, seed=seed, steps=steps, overrides=overrides,
+                        model=None if model is None else str(ROOT / model.format(task=task)))
         train(cfg, runs["revised"], progress=False, stop_at=max(1, budget // 3))
         shutil.copytree(runs["revised"], runs["unrevised"])
         r = review(runs["revised"], threshold=threshold, gif=False, num_samples=2_000)
         spec = load_checkpoint(runs["revised"] / "checkpoint.pt")["config"]["model_spec"]
-        corrected_spec(r, spec, spec_path, keep_linked, unlink_held, unlink_together)
+        corrected_spec(r, spec, spec_path, keep_linked, unlink_held, unlink_together, drop_held)
         revise(runs["revised"], spec_path, progress=False)
         train(RunConfig(task=task), runs["unrevised"], resume=True, progress=False)
     if not finished(runs["restart"]):
@@ -180,6 +186,10 @@ def main(argv: list[str] | None = None) -> int:
                    help="also remove the positive edges that hold a sub-goal in G* which most successes skipped")
     p.add_argument("--unlink-together", action="store_true",
                    help="also remove the negative edges whose two sub-goals every recent success achieved")
+    p.add_argument("--drop-held", action="store_true",
+                   help="also drop the sub-goals positive edges hold in G* though most successes skipped them")
+    p.add_argument("--model", help="the spec the run starts from, a path from the repository root with {task} "
+                                   "(default: each task's built-in <task>-specific)")
     args = p.parse_args(argv)
     overrides: list[str] = list(args.overrides)
     if args.smoke:
@@ -190,8 +200,13 @@ def main(argv: list[str] | None = None) -> int:
         settings["unlink_held"] = True
     if args.unlink_together:
         settings["unlink_together"] = True
+    if args.drop_held:
+        settings["drop_held"] = True
+    if args.model:
+        settings["model"] = args.model
     guard_settings(out, "measure_revise", settings)
-    jobs = [(t, s, out, args.steps, overrides, args.threshold, args.keep_linked, args.unlink_held, args.unlink_together)
+    jobs = [(t, s, out, args.steps, overrides, args.threshold, args.keep_linked, args.unlink_held, args.unlink_together,
+             args.model, args.drop_held)
             for t in args.tasks for s in args.seeds]
     return finish(run_jobs(one, jobs, args.workers), out, summarise)
 
