@@ -85,6 +85,21 @@ def test_unlink_held_removes_only_the_positive_edges_the_review_names(tmp_path):
     assert new["edges"] == [["r_key", "r_door", "positive"], ["r_door", "goal", "positive"]]
 
 
+def test_drop_held_drops_the_sub_goals_the_review_says_edges_hold_with_their_edges(tmp_path):
+    import yaml
+
+    spec = {"name": "toy", "task": "keydoor_incorrect", "subgoals": ["r_key", "r_door", "goal", "corner", "far"],
+            "edges": [["r_key", "r_door", "positive"], ["r_door", "goal", "positive"], ["corner", "goal", "positive"],
+                      ["far", "goal", "positive"]]}
+    review = {"suggested_drops": [{"name": "far", "success_frequency": 0.1}], "flagged_edges": [],
+              "held_by_edges": [{"name": "corner", "success_frequency": 0.3, "positive_edges": ["goal"]}]}
+    kept = yaml.safe_load(measure_revise.corrected_spec(review, spec, tmp_path / "kept.yaml").read_text())
+    assert kept["subgoals"] == ["r_key", "r_door", "goal", "corner"]    # without the option: only the suggested drop
+    new = yaml.safe_load(measure_revise.corrected_spec(review, spec, tmp_path / "new.yaml", drop_held=True).read_text())
+    assert new["subgoals"] == ["r_key", "r_door", "goal"]
+    assert new["edges"] == [["r_key", "r_door", "positive"], ["r_door", "goal", "positive"]]
+
+
 def test_unlink_together_removes_only_the_negative_edges_the_successes_contradict(tmp_path):
     import yaml
 
