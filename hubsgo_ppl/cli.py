@@ -322,6 +322,10 @@ def cmd_review(args: argparse.Namespace) -> int:
     held = [f"{d['name']} ({d['success_frequency']:.0%}; edges to {', '.join(d['positive_edges']) or 'none'})"
             for d in r["held_by_edges"]]
     print(f"in G*, held by your positive edges, skipped by most successes: {'; '.join(held) or 'none'}")
+    up = [f"{d['name']} (P={d['marginal']:.2f}, {d['success_frequency']:.0%}; edges to {', '.join(d['positive_edges'])})"
+          for d in r.get("held_up_by_edges", [])]
+    if up:
+        print(f"outside G*, held up by your positive edges, skipped by most successes: {'; '.join(up)}")
     needed = [d["name"] for d in r["needed_not_in_g_star"]]
     print(f"achieved by every recent success, not in G*: {', '.join(needed) or 'none'}")
     links = [f"{c['u']}--{c['v']}" for c in r.get("suggested_links", [])]

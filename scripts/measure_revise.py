@@ -77,15 +77,16 @@ def corrected_spec(review: dict[str, Any], spec: dict[str, Any], path: Path, kee
     most recent successes skipped it (``review["held_by_edges"]``); the sub-goal stays a candidate.
     ``unlink_together``: a human who also removes the negative edges whose two sub-goals most recent
     successes both achieved (``review["negative_edges_achieved_together"]``).
-    ``drop_held``: a human who drops the sub-goals that the review says positive edges hold in G*
-    though most recent successes skipped them (``review["held_by_edges"]``), with their edges."""
+    ``drop_held``: a human who drops the sub-goals that the review says positive edges hold in G*, or
+    above the drop threshold, though most recent successes skipped them (``review["held_by_edges"]``
+    and ``review["held_up_by_edges"]``), with their edges."""
 
     linked = {n for u, v, _ in spec["edges"] for n in (u, v)}
     drop = {d["name"] for d in review["suggested_drops"]
             if (d["success_frequency"] is None or d["success_frequency"] < 0.5)
             and not (keep_linked and d["name"] in linked)}
     if drop_held:
-        drop |= {d["name"] for d in review.get("held_by_edges", [])}
+        drop |= {d["name"] for d in review.get("held_by_edges", []) + review.get("held_up_by_edges", [])}
     keep = [n for n in spec["subgoals"] if n not in drop]
     if not keep:                                    # a spec lists at least one sub-goal
         keep, drop = list(spec["subgoals"]), set()

@@ -13,7 +13,8 @@ that the human can revise the spec:
 - *suggested drops*: sub-goals the critic has pushed below ``threshold`` (P(w_i = 1) < threshold);
 - where G*'s top set and the recent successes disagree (:func:`prior_against_successes`): a sub-goal
   the human's positive edges keep in G* though most successes did without it, and one every success
-  achieved that G* leaves out;
+  achieved that G* leaves out; and a sub-goal outside G* that those edges keep above the drop
+  threshold though most successes did without it (:func:`held_up_by_edges`);
 - negative edges the successes contradict (:func:`negative_edges_against_successes`): two sub-goals
   the human said exclude each other that every recent success achieved;
 - what the agent achieves: the frequency of each sub-goal over the filter's recent successful
@@ -55,7 +56,7 @@ from ..experiments.logger import read_csv_rows
 from ..experiments.run import RunError, load_run, task_goals
 
 __all__ = ["review", "compare_couplings", "human_edge_signs", "suggested_drops", "prior_against_successes",
-           "negative_edges_against_successes", "suggested_links", "suggested_spec",
+           "negative_edges_against_successes", "held_up_by_edges", "suggested_links", "suggested_spec",
            "marginal_trend", "achieved_frequencies", "metrics_summary", "render_markdown", "plot_review_graph", "format_chosen", "DEAD_BAND", "REVIEW_FORMAT"]
 
 REVIEW_FORMAT = 1
@@ -149,6 +150,26 @@ def prior_against_successes(top: Sequence[str], names: Sequence[str], achieved: 
     return out
 
 
+def held_up_by_edges(top: Sequence[str], marginals: Mapping[str, float], achieved: Mapping[str, float] | None,
+                     human: Mapping[frozenset, str], threshold: float, rare: float = 0.5) -> list[dict[str, Any]]:
+    """Sub-goals outside G*'s top set that the human's positive edges keep at P(w_i = 1) >= ``threshold``
+    (so no drop is suggested) though fewer than ``rare`` of the recent successes achieved them:
+    ``{"name", "marginal", "success_frequency", "positive_edges"}`` in the order of ``marginals``. They
+    stay in the filtered sets Ĝt that the critic samples, and the high level keeps choosing them, so
+    the review names them as it names such a sub-goal in G* (``held_by_edges``). Empty without
+    successes."""
+    if achieved is None:
+        return []
+    chosen = set(top)
+    rows = []
+    for n, p in marginals.items():
+        edges = sorted(next(iter(e - {n})) for e, sign in human.items() if n in e and sign == "positive")
+        freq = float(achieved.get(n, 0.0))
+        if n not in chosen and edges and float(p) >= threshold and freq < rare:
+            rows.append({"name": n, "marginal": float(p), "success_frequency": freq, "positive_edges": edges})
+    return rows
+
+
 def _outcome_array(outcomes: Any, n: int) -> np.ndarray:
     """The filter's recent successful episodes (a tensor or array) as a float array, one row of ``n``
     achieved flags per episode."""
@@ -215,7 +236,8 @@ def suggested_spec(r: Mapping[str, Any], spec: Mapping[str, Any], rare: float = 
       are then the prior's, not evidence);
     - give each flagged edge its learned sign, and each edge left unknown with a learned sign that sign;
     - remove each negative edge whose two sub-goals every recent success achieved, and each
-      positive edge that holds in G* a sub-goal most recent successes skipped;
+      positive edge that holds in G*, or above the drop threshold, a sub-goal most recent successes
+      skipped;
     - where G* leaves out the goal that every recent success reached, add the positive edges of
       :func:`suggested_links` (what most successes achieved, linked to the goal); a graph preset without
       edges (``independent``) becomes ``specific`` with those links as its only edges (the edges the
@@ -231,7 +253,8 @@ def suggested_spec(r: Mapping[str, Any], spec: Mapping[str, Any], rare: float = 
         keep, drop = list(spec["subgoals"]), set()
     sign = {frozenset((c["u"], c["v"])): c["learned"] for c in r.get("flagged_edges", []) + r.get("suggested_signs", [])}
     unlink = {frozenset((c["u"], c["v"])) for c in r.get("negative_edges_achieved_together", [])}
-    unlink |= {frozenset((d["name"], v)) for d in r.get("held_by_edges", []) for v in d["positive_edges"]}
+    unlink |= {frozenset((d["name"], v)) for d in r.get("held_by_edges", []) + r.get("held_up_by_edges", [])
+               for v in d["positive_edges"]}
     edges, seen = [], set()
     for u, v, s in spec.get("edges", []):
         e = frozenset((u, v))
@@ -407,6 +430,8 @@ def _review(run_dir: Path, resolved: dict[str, Any], env: Any, agent: Any, thres
         "suggested_drops": suggested_drops(marginals, threshold, achieved["frequency"]),
         **prior_against_successes(ranking[0]["subgoals"], names, achieved["frequency"], acting),
         "goals": [g for g in task_goals(resolved["task_ref"]) if g in names],
+        "held_up_by_edges": held_up_by_edges(ranking[0]["subgoals"], marginals, achieved["frequency"], acting,
+                                             threshold),
         "negative_edges_achieved_together": negative_edges_against_successes(outcomes, names, acting),
         "achieved": {"recent_successes": achieved, "metrics": metrics_summary(run_dir / "metrics.csv", names, last)},
         "episode": None,
@@ -539,6 +564,11 @@ def render_markdown(r: dict[str, Any]) -> str:
         edges = ", ".join(f"{d['name']} — {v}" for v in d["positive_edges"]) or "none"
         changes.append(f"- **{d['name']} is in G* but only {_pct(d['success_frequency'])} of the recent successes "
                        f"achieved it**: your positive edges hold it there ({edges}); remove them, or drop {d['name']}.")
+    for d in r.get("held_up_by_edges", []):
+        edges = ", ".join(f"{d['name']} — {v}" for v in d["positive_edges"])
+        changes.append(f"- **{d['name']} has P(w = 1) = {d['marginal']:.2f} but only {_pct(d['success_frequency'])} of the "
+                       f"recent successes achieved it**: your positive edges hold it up ({edges}), so it stays in the "
+                       f"sets Ĝt the high level chooses from; remove them, or drop {d['name']}.")
     for c in r.get("negative_edges_achieved_together", []):
         changes.append(f"- **edge {c['u']} — {c['v']}**: you said *negative* (one excludes the other), yet "
                        f"{_pct(c['both_frequency'])} of the recent successes achieved both; remove it, or make it "

@@ -91,12 +91,15 @@ def test_drop_held_drops_the_sub_goals_the_review_says_edges_hold_with_their_edg
     spec = {"name": "toy", "task": "keydoor_incorrect", "subgoals": ["r_key", "r_door", "goal", "corner", "far"],
             "edges": [["r_key", "r_door", "positive"], ["r_door", "goal", "positive"], ["corner", "goal", "positive"],
                       ["far", "goal", "positive"]]}
+    spec["subgoals"].append("up")
+    spec["edges"].append(["up", "goal", "positive"])
     review = {"suggested_drops": [{"name": "far", "success_frequency": 0.1}], "flagged_edges": [],
-              "held_by_edges": [{"name": "corner", "success_frequency": 0.3, "positive_edges": ["goal"]}]}
+              "held_by_edges": [{"name": "corner", "success_frequency": 0.3, "positive_edges": ["goal"]}],
+              "held_up_by_edges": [{"name": "up", "marginal": 0.4, "success_frequency": 0.0, "positive_edges": ["goal"]}]}
     kept = yaml.safe_load(measure_revise.corrected_spec(review, spec, tmp_path / "kept.yaml").read_text())
-    assert kept["subgoals"] == ["r_key", "r_door", "goal", "corner"]    # without the option: only the suggested drop
+    assert kept["subgoals"] == ["r_key", "r_door", "goal", "corner", "up"]   # without the option: the suggested drop
     new = yaml.safe_load(measure_revise.corrected_spec(review, spec, tmp_path / "new.yaml", drop_held=True).read_text())
-    assert new["subgoals"] == ["r_key", "r_door", "goal"]
+    assert new["subgoals"] == ["r_key", "r_door", "goal"]       # held in G* and held up outside it, with their edges
     assert new["edges"] == [["r_key", "r_door", "positive"], ["r_door", "goal", "positive"]]
 
 
