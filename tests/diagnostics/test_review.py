@@ -474,6 +474,31 @@ def test_the_suggested_links_move_the_exact_posterior_mode_from_the_empty_set_to
     assert (marg[2:] > 0.8).all() and (marg[:2] < 0.2).all(), marg
 
 
+def test_links_for_successes_split_evenly_between_two_routes_leave_one_route_as_the_exact_mode():
+    """Ten successes by each of two routes: every route sub-goal reaches half of them, so the review links
+    all four to the goal. Enumerating all 2^5 sets at the settled power, the posterior's two modes are
+    the two routes, tied, and their union is below either: G* names one route, not both."""
+    from hubsgo_ppl.graph import SubgoalGraph
+    from hubsgo_ppl.infer.likelihoods import OutcomeLikelihood
+    from hubsgo_ppl.infer.priors import IsingPrior
+
+    names = ["a_key", "a_door", "b_key", "b_door", "goal"]
+    a, b = torch.tensor([1.0, 1, 0, 0, 1]), torch.tensor([0.0, 0, 1, 1, 1])
+    freq = {"a_key": 0.5, "a_door": 0.5, "b_key": 0.5, "b_door": 0.5, "goal": 1.0}
+    links = suggested_links([], names, freq, ["goal"], {})
+    assert [c["u"] for c in links] == names[:4]
+    lik = OutcomeLikelihood()
+    states = torch.tensor([[(k >> i) & 1 for i in range(5)] for k in range(32)], dtype=torch.float32)
+    edges = [(c["u"], c["v"], 1) for c in links]
+    logp = IsingPrior(SubgoalGraph(names, edges), strength=3.0, field=-2.0).distribution().log_prob(states)
+    logp = logp + lik.log_likelihood(states, torch.stack([a] * 10 + [b] * 10)) * lik.settled_scale()
+    p = (logp - torch.logsumexp(logp, 0)).exp()
+    index = {tuple(s.int().tolist()): i for i, s in enumerate(states)}
+    pa, pb, union = (float(p[index[tuple(x)]]) for x in ([1, 1, 0, 0, 1], [0, 0, 1, 1, 1], [1, 1, 1, 1, 1]))
+    assert abs(pa - pb) < 1e-6 and pa == pytest.approx(float(p.max()))
+    assert union < pa / 2, (pa, union)        # 0.081 against 0.188
+
+
 def test_review_and_revise_of_a_finished_run_without_edges_name_the_route(tmp_path, capsys):
     """A finished run whose critic has no edges: G* is empty though every success took the blue route.
     The review suggests linking the route to the goal; `hubsgo revise --no-train` keeps the run finished
