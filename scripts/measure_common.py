@@ -50,7 +50,7 @@ def write_rows(rows: list[dict], path) -> None:
     from hubsgo_ppl.experiments.io import write_text
 
     buf = io.StringIO(newline="")
-    writer = csv.DictWriter(buf, fieldnames=list(rows[0]))
+    writer = csv.DictWriter(buf, fieldnames=list(dict.fromkeys(k for r in rows for k in r)), restval="")
     writer.writeheader()
     writer.writerows(rows)
     write_text(path, buf.getvalue())
@@ -82,8 +82,38 @@ def mean_se(values) -> tuple[float, float]:
     return float(v.mean()), float(v.std(ddof=1) / math.sqrt(len(v))) if len(v) > 1 else 0.0
 
 
+#: the fields that name a result row's run (a revision's task, a transfer's pair; seed; arm)
+ROW_KEYS = ("task", "source", "target", "seed", "arm")
+
+
+def _row_key(row: dict) -> tuple:
+    return tuple("" if row.get(k) is None else str(int(float(row[k])) if k == "seed" else row[k]) for k in ROW_KEYS)
+
+
+def merged_rows(rows: list[dict], path) -> list[dict]:
+    """``rows`` together with the rows of an earlier ``results.csv`` at ``path`` for runs this
+    invocation did not measure (other seeds or tasks of the same folder), ordered by run: an
+    invocation with ``--seeds 5 6 7 8 9`` adds to the table of seeds 0-4 instead of replacing it."""
+    import csv
+    from pathlib import Path
+
+    path = Path(path)
+    new = {_row_key(r) for r in rows}
+    old = []
+    if path.is_file():
+        with path.open(newline="") as f:
+            old = [{**r, "seed": int(float(r["seed"]))} for r in csv.DictReader(f) if _row_key(r) not in new]
+
+    def order(r: dict) -> tuple:
+        k = _row_key(r)
+        return (k[0], k[1], k[2], int(k[3]) if k[3] else 0)
+    return sorted(old + list(rows), key=order)
+
+
 def finish(rows: list[dict], out, summarise) -> int:
-    """Write results.csv and summary.md into ``out`` and print the summary."""
+    """Write results.csv (this invocation's rows merged with the earlier ones of other runs,
+    :func:`merged_rows`) and summary.md into ``out`` and print the summary."""
+    rows = merged_rows(rows, out / "results.csv")
     write_rows(rows, out / "results.csv")
     print(summarise(rows, out / "summary.md"))
     print(f"runs, results.csv and summary.md in {out}")

@@ -51,3 +51,27 @@ def test_the_scripts_refuse_an_out_made_with_other_settings_before_running_anyth
         with pytest.raises(SystemExit, match=r"holds runs made with --steps 900( --threshold 0\.2)?, not "):
             script.main(["--out", str(out), *argv])
     assert len(ran) == 2
+
+
+def test_finish_adds_the_rows_of_new_seeds_to_the_earlier_table_and_replaces_re_measured_ones(tmp_path, capsys):
+    def row(seed, arm, steps):
+        return {"task": "keydoor_incorrect", "seed": seed, "arm": arm, "steps_to_90": steps, "final_success": 1.0}
+
+    summarise = measure_revise.summarise
+    first = [row(s, a, 1000.0 * (s + 1)) for s in (0, 1) for a in measure_revise.ARMS]
+    for r in first:
+        r.update(total_steps_to_90=r["steps_to_90"], late_return=0.9, first_success=100.0, failures_after_pause=0.0,
+                 settled_length=30.0, g_star_one_route=1.0, g_star_p=0.5)
+    measure_common.finish(first, tmp_path, summarise)
+    later = [dict(r, seed=2, steps_to_90=3000.0) for r in first if r["seed"] == 0]
+    again = [dict(r, steps_to_90=9999.0) for r in first if r["seed"] == 1 and r["arm"] == "revised"]
+    measure_common.finish(later + again, tmp_path, summarise)
+    import csv
+
+    with (tmp_path / "results.csv").open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert [(r["seed"], r["arm"]) for r in rows][:3] == [("0", a) for a in measure_revise.ARMS]
+    assert len(rows) == 9 and {r["seed"] for r in rows} == {"0", "1", "2"}
+    by = {(r["seed"], r["arm"]): float(r["steps_to_90"]) for r in rows}
+    assert by[("1", "revised")] == 9999.0 and by[("1", "restart")] == 2000.0 and by[("2", "unrevised")] == 3000.0
+    assert "| keydoor_incorrect | revised | 3 |" in (tmp_path / "summary.md").read_text()
