@@ -348,10 +348,11 @@ def cmd_review(args: argparse.Namespace) -> int:
     if "suggested_spec" in r["files"]:
         from .diagnostics.review import revise_flags
 
+        flags = revise_flags(r)
         finished = (" (the run has taken its budget: --no-train reads G* again under the revised spec; --steps "
-                    "TOTAL trains on)" if revise_flags(r) else "")
+                    "TOTAL trains on)" if flags else "")
         print(f"to revise: edit {out / r['files']['suggested_spec']}, then "
-              f"`hubsgo revise {r['run_dir']} --model {out / r['files']['suggested_spec']}{revise_flags(r)}`{finished}")
+              f"`hubsgo revise {r['run_dir']} --model {out / r['files']['suggested_spec']}{flags}`{finished}")
     return 0
 
 

@@ -137,17 +137,20 @@ def prior_against_successes(top: Sequence[str], names: Sequence[str], achieved: 
     if achieved is None:
         return out
     chosen = set(top)
-
-    def positive(n: str) -> list[str]:
-        return sorted(next(iter(e - {n})) for e, sign in human.items() if n in e and sign == "positive")
-
     for n in names:
         freq = float(achieved.get(n, 0.0))
         if n in chosen and freq < rare:
-            out["held_by_edges"].append({"name": n, "success_frequency": freq, "positive_edges": positive(n)})
+            out["held_by_edges"].append({"name": n, "success_frequency": freq,
+                                         "positive_edges": _positive_edges(human, n)})
         elif n not in chosen and freq >= 1.0:
-            out["needed_not_in_g_star"].append({"name": n, "success_frequency": freq, "positive_edges": positive(n)})
+            out["needed_not_in_g_star"].append({"name": n, "success_frequency": freq,
+                                                "positive_edges": _positive_edges(human, n)})
     return out
+
+
+def _positive_edges(human: Mapping[frozenset, str], n: str) -> list[str]:
+    """The sub-goals the human's positive edges join to ``n``, sorted."""
+    return sorted(next(iter(e - {n})) for e, sign in human.items() if n in e and sign == "positive")
 
 
 def held_up_by_edges(top: Sequence[str], marginals: Mapping[str, float], achieved: Mapping[str, float] | None,
@@ -163,9 +166,11 @@ def held_up_by_edges(top: Sequence[str], marginals: Mapping[str, float], achieve
     chosen = set(top)
     rows = []
     for n, p in marginals.items():
-        edges = sorted(next(iter(e - {n})) for e, sign in human.items() if n in e and sign == "positive")
         freq = float(achieved.get(n, 0.0))
-        if n not in chosen and edges and float(p) >= threshold and freq < rare:
+        if n in chosen or float(p) < threshold or freq >= rare:
+            continue
+        edges = _positive_edges(human, n)
+        if edges:
             rows.append({"name": n, "marginal": float(p), "success_frequency": freq, "positive_edges": edges})
     return rows
 
@@ -266,12 +271,13 @@ def suggested_spec(r: Mapping[str, Any], spec: Mapping[str, Any], rare: float = 
         if e not in seen and not e & drop:
             edges.append([c["u"], c["v"], c["learned"]])
     links = [c for c in r.get("suggested_links", []) if not {c["u"], c["v"]} & drop]
+    independent = bool(links) and spec.get("graph") == "independent"
     linked = {frozenset((c["u"], c["v"])) for c in links}
-    edges = [e for e in edges if frozenset(e[:2]) not in linked] + [[c["u"], c["v"], "positive"] for c in links]
-    if links and spec.get("graph") == "independent":      # its listed edges acted on nothing: only the links
-        edges = [[c["u"], c["v"], "positive"] for c in links]
+    # an independent graph's listed edges acted on nothing: the links are its only edges
+    edges = [] if independent else [e for e in edges if frozenset(e[:2]) not in linked]
+    edges += [[c["u"], c["v"], "positive"] for c in links]
     out = {**spec, "name": f"{spec['name']}-reviewed", "subgoals": keep, "edges": edges}
-    if links and spec.get("graph") == "independent":
+    if independent:
         out["graph"] = "specific"
     out["task"] = spec.get("task") or r.get("task")      # a spec written without one names the run's task
     return {k: v for k, v in out.items() if v is not None}
@@ -402,6 +408,8 @@ def _review(run_dir: Path, resolved: dict[str, Any], env: Any, agent: Any, thres
                  if frozenset((u, v)) not in {frozenset(e) for e in factors["pairwise"]}]
     outcomes = agent.filter.outcomes()
     achieved = achieved_frequencies(outcomes, names)
+    top = ranking[0]["subgoals"]
+    goals = [g for g in task_goals(resolved["task_ref"]) if g in names]
     baseline = _previous_review(out / "review.json", names) or _first_history_row(run_dir / "critic_history.csv", names)
 
     result: dict[str, Any] = {
@@ -428,18 +436,16 @@ def _review(run_dir: Path, resolved: dict[str, Any], env: Any, agent: Any, thres
         "suggested_signs": [c for c in couplings if not c["contradicts"] and c["suggestion"]],
         "spec_edges_not_in_graph": spec_only,
         "suggested_drops": suggested_drops(marginals, threshold, achieved["frequency"]),
-        **prior_against_successes(ranking[0]["subgoals"], names, achieved["frequency"], acting),
-        "goals": [g for g in task_goals(resolved["task_ref"]) if g in names],
-        "held_up_by_edges": held_up_by_edges(ranking[0]["subgoals"], marginals, achieved["frequency"], acting,
-                                             threshold),
+        **prior_against_successes(top, names, achieved["frequency"], acting),
+        "goals": goals,
+        "held_up_by_edges": held_up_by_edges(top, marginals, achieved["frequency"], acting, threshold),
+        "suggested_links": suggested_links(top, names, achieved["frequency"], goals, acting),
         "negative_edges_achieved_together": negative_edges_against_successes(outcomes, names, acting),
         "achieved": {"recent_successes": achieved, "metrics": metrics_summary(run_dir / "metrics.csv", names, last)},
         "episode": None,
         "review_dir": str(out),
         "files": {"json": "review.json", "markdown": "review.md", "mrf_graph": "mrf_graph.png"},
     }
-    result["suggested_links"] = suggested_links(ranking[0]["subgoals"], names, achieved["frequency"],
-                                                result["goals"], acting)
     out.mkdir(parents=True, exist_ok=True)
     plot_review_graph(result, out / "mrf_graph.png")
     if resolved.get("family") == "minigrid" and gif:

@@ -227,7 +227,7 @@ def optimal_steps(source: Any, start_dir: int | None = None) -> int:
 def optimal_steps_range(source: Any) -> tuple[int, int]:
     """Fewest steps to the goal from the start, over every start direction the task can draw: ``(fewest,
     most)``, equal where the start direction is fixed."""
-    _, starts, taken = _resolve(source, None)
+    _, starts, _ = _resolve(source, None)
     if len(starts) == 1:
         n = optimal_steps(source)
         return n, n
