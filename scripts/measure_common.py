@@ -130,9 +130,11 @@ def cell(sel: list[dict], key: str) -> str:
     return ("-" if math.isnan(m) else f"{m:,.0f} ± {se:,.0f}") + f" ({reached}/{len(sel)} reached)"
 
 
-def summary_table(rows: list[dict], group, arms, header: list[str], keys: list[str], path) -> str:
+def summary_table(rows: list[dict], group, arms, header: list[str], keys: list[str], path,
+                  paired: list[str] = ()) -> str:
     """A markdown table, one line per (group, arm) with rows: the group's label (``group(row)``), the arm,
-    the number of seeds and ``cell`` of each key; written atomically to ``path``."""
+    the number of seeds and ``cell`` of each key, then the table lines ``paired`` (:func:`paired_lines`)
+    after a blank line; written atomically to ``path``."""
     from hubsgo_ppl.experiments.io import write_text
 
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
@@ -141,9 +143,39 @@ def summary_table(rows: list[dict], group, arms, header: list[str], keys: list[s
             sel = [r for r in rows if group(r) == label and r["arm"] == arm]
             if sel:
                 lines.append(f"| {label} | {arm} | {len(sel)} | " + " | ".join(cell(sel, k) for k in keys) + " |")
+    if paired:
+        lines += ["", *paired]
     text = "\n".join(lines) + "\n"
     write_text(path, text)
     return text
+
+
+def paired_lines(rows: list[dict], group, pairs, key: str, label: str = "") -> list[str]:
+    """Markdown table lines comparing two arms seed by seed on ``key`` (steps to 90% success), for each
+    ``(arm, other)`` of ``pairs`` per group: the mean ± s.e. of ``arm`` minus ``other`` over the seeds
+    where both reached it (negative: ``arm`` sooner), how many of those seeds ``arm`` was sooner, later
+    and level in, and the seeds only one of the two reached. ``label`` heads the first column."""
+    lines = [f"| {label} | comparison | seeds both reached | first minus second, mean ± s.e. (negative: sooner) "
+             "| sooner | later | level | only one reached |", "|" + "---|" * 8]
+    for g in dict.fromkeys(group(r) for r in rows):
+        by_arm: dict[str, dict[int, float]] = {}
+        for r in rows:
+            if group(r) == g:
+                by_arm.setdefault(r["arm"], {})[int(float(r["seed"]))] = float(r[key])
+        for arm, other in pairs:
+            mine, theirs = by_arm.get(arm, {}), by_arm.get(other, {})
+            seeds = sorted(set(mine) & set(theirs))
+            if not seeds:
+                continue
+            both = [mine[s] - theirs[s] for s in seeds if math.isfinite(mine[s]) and math.isfinite(theirs[s])]
+            only = [f"{arm if math.isfinite(mine[s]) else other} in seed {s}" for s in seeds
+                    if math.isfinite(mine[s]) != math.isfinite(theirs[s])]
+            m, se = mean_se(both)
+            diff = "-" if math.isnan(m) else f"{m:,.0f} ± {se:,.0f}"
+            lines.append(f"| {g} | {arm} vs {other} | {len(both)} of {len(seeds)} | {diff} | "
+                         f"{sum(d < 0 for d in both)} | {sum(d > 0 for d in both)} | {sum(d == 0 for d in both)} | "
+                         f"{', '.join(only) or '-'} |")
+    return lines
 
 
 def output_dir(path):

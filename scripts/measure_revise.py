@@ -20,7 +20,9 @@ the B/3 steps spent before the pause; the env step of the first success in the a
 at the end of each run whether G*'s top set is exactly one route (``critic_report.consistent``) and
 its probability.
 For the revised and unrevised arms also the failed episodes that began after the pause and the mean
-length of the 20th to 60th of those episodes.
+length of the 20th to 60th of those episodes. A second table pairs the seeds: the revised arm's total
+steps to 90% success minus the unrevised arm's and the restart's, as mean ± s.e. over the seeds where
+both reached it, with the seeds it was sooner, later and level in.
 Everything goes under ``--out``: one folder per task, seed and arm, ``results.csv`` (one row per run)
 and ``summary.md``. Re-running skips finished runs (the runs are ordinary run directories), so ``--out``
 remembers its settings (``settings.json``: ``--steps``, ``--set``, ``--threshold``, ``--keep-linked``,
@@ -40,7 +42,8 @@ import shutil
 import sys
 from pathlib import Path
 from typing import Any
-from measure_common import SMOKE, WINDOW, finish, guard_settings, parser, run_jobs, output_dir, steps_to, summary_table  # noqa: E402  (a sibling script module)
+from measure_common import (SMOKE, WINDOW, finish, guard_settings, output_dir, paired_lines, parser, run_jobs,  # noqa: E402
+                            steps_to, summary_table)  # noqa: E402  (a sibling script module)
 
 ROOT = Path(__file__).resolve().parents[1]
 TASKS = ("keydoor_incorrect", "fourroom_incorrect")
@@ -174,7 +177,9 @@ def summarise(rows: list[dict], path: Path) -> str:
                           "length of the 20th-60th episode after B/3", "G* one route (share of seeds)",
                           "p(top)"],
                          ["final_success", "late_return", "steps_to_90", "total_steps_to_90", "first_success",
-                          "failures_after_pause", "settled_length", "g_star_one_route", "g_star_p"], path)
+                          "failures_after_pause", "settled_length", "g_star_one_route", "g_star_p"], path,
+                         paired=paired_lines(rows, lambda r: r["task"], [("revised", "unrevised"), ("revised", "restart")],
+                                             "total_steps_to_90", "task"))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -16,7 +16,8 @@ one per arm:
 
 Per arm it reports, as mean ± standard error over the seeds, the env steps until the rolling success
 rate (20 episodes) first reaches 90% (runs that never reach it are counted, not averaged) and the
-success rate over the last 20 episodes. Everything goes under ``--out``: the runs, ``results.csv``
+success rate over the last 20 episodes; a second table pairs the seeds, each transfer arm's steps to
+90% success minus the scratch run's of the same seed. Everything goes under ``--out``: the runs, ``results.csv``
 (one row per target run) and ``summary.md``. Re-running skips finished runs, so ``--out`` remembers its
 settings (``settings.json``: ``--steps``, ``--set``, ``--source-set``, ``--restart-schedules``) and refuses other ones;
 more seeds, sources or arms may be added. To reuse source runs under other settings, copy their
@@ -34,7 +35,8 @@ from __future__ import annotations
 import shutil
 import sys
 from pathlib import Path
-from measure_common import SMOKE, WINDOW, finish, guard_settings, parser, run_jobs, output_dir, steps_to, summary_table  # noqa: E402  (a sibling script module)
+from measure_common import (SMOKE, WINDOW, finish, guard_settings, output_dir, paired_lines, parser, run_jobs,  # noqa: E402
+                            steps_to, summary_table)  # noqa: E402  (a sibling script module)
 
 ROOT = Path(__file__).resolve().parents[1]
 PAIRS = {"keydoor": "keydoor_moved", "fourroom": "fourroom_moved", "threepair": "threepair_moved",
@@ -92,7 +94,9 @@ def one(source: str, seed: int, out: Path, steps: int | None, overrides: list[st
 def summarise(rows: list[dict], path: Path) -> str:
     return summary_table(rows, lambda r: f"{r['source']} -> {r['target']}", ARMS,
                          ["pair", "arm", "seeds", "steps to 90% success", "success, last 20 episodes"],
-                         ["steps_to_90", "final_success"], path)
+                         ["steps_to_90", "final_success"], path,
+                         paired=paired_lines(rows, lambda r: f"{r['source']} -> {r['target']}",
+                                             [(arm, "scratch") for arm in ARMS if arm != "scratch"], "steps_to_90", "pair"))
 
 
 def main(argv: list[str] | None = None) -> int:

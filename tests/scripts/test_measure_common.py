@@ -75,3 +75,28 @@ def test_finish_adds_the_rows_of_new_seeds_to_the_earlier_table_and_replaces_re_
     by = {(r["seed"], r["arm"]): float(r["steps_to_90"]) for r in rows}
     assert by[("1", "revised")] == 9999.0 and by[("1", "restart")] == 2000.0 and by[("2", "unrevised")] == 3000.0
     assert "| keydoor_incorrect | revised | 3 |" in (tmp_path / "summary.md").read_text()
+
+
+def test_paired_lines_compare_two_arms_seed_by_seed_and_name_the_seeds_only_one_reached():
+    nan = float("nan")
+    steps = {"revised": [1000.0, 2000.0, 3000.0, nan, 5000.0], "unrevised": [1500.0, 2000.0, 2500.0, 4000.0, nan]}
+    rows = [{"task": "kd", "seed": s, "arm": arm, "total_steps_to_90": v}
+            for arm, vs in steps.items() for s, v in enumerate(vs)]
+    lines = measure_common.paired_lines(rows, lambda r: r["task"], [("revised", "unrevised")], "total_steps_to_90", "task")
+    assert len(lines) == 3 and lines[0].startswith("| task | comparison |")
+    # differences over seeds 0-2: -500, 0, +500 -> mean 0, s.e. 500/sqrt(3) = 289
+    assert lines[2] == "| kd | revised vs unrevised | 3 of 5 | 0 ± 289 | 1 | 1 | 1 | unrevised in seed 3, revised in seed 4 |"
+    assert measure_common.paired_lines(rows, lambda r: r["task"], [("revised", "restart")], "total_steps_to_90")[2:] == []
+
+
+def test_the_revision_summary_ends_with_the_paired_comparisons(tmp_path):
+    rows = []
+    for s in range(3):
+        for arm, v in (("revised", 900.0 + s), ("unrevised", 1000.0), ("restart", 1000.0 + 100 * s)):
+            rows.append({"task": "kd", "seed": s, "arm": arm, "total_steps_to_90": v, "steps_to_90": v,
+                         "final_success": 1.0, "late_return": 0.9, "first_success": 10.0, "failures_after_pause": 0.0,
+                         "settled_length": 30.0, "g_star_one_route": 1.0, "g_star_p": 0.5})
+    text = measure_revise.summarise(rows, tmp_path / "summary.md")
+    assert "| kd | revised vs unrevised | 3 of 3 | -99 ± 1 | 3 | 0 | 0 | - |" in text
+    assert "| kd | revised vs restart | 3 of 3 | -199 ± 57 | 3 | 0 | 0 | - |" in text
+    assert (tmp_path / "summary.md").read_text() == text
