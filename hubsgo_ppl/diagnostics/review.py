@@ -538,6 +538,10 @@ def _pct(x: float | None) -> str:
     return "-" if x is None else f"{100 * x:.0f}%"
 
 
+#: below this many recent successes review.md says its success frequencies are thin evidence
+FEW_SUCCESSES = 5
+
+
 def render_markdown(r: dict[str, Any]) -> str:
     """review.md from the content of review.json."""
     names, marg, trend = r["names"], r["marginals"], r["trend"]
@@ -594,6 +598,11 @@ def render_markdown(r: dict[str, Any]) -> str:
         changes.append(f"- **link {c['u']} — {c['v']} (positive)**: G* leaves out {c['v']}, which every recent "
                        f"success reached, so it names no route; {_pct(c['success_frequency'])} of those successes "
                        f"achieved {c['u']}{was}.")
+    n_succ = succ["episodes"]
+    if changes and n_succ:
+        few = (f" Only {n_succ}: a drop read from so few can remove a route the agent still needs; if unsure, train on "
+               f"and review again." if n_succ < FEW_SUCCESSES else "")
+        changes = [f"What the recent successes achieved is read from the {n_succ} the filter keeps.{few}", "", *changes]
     lines += changes or [f"None: every learned coupling agrees with your edge signs, and every sub-goal has "
                          f"P(w = 1) >= {r['threshold']:.2f}."]
     if "suggested_spec" in r["files"]:

@@ -10,7 +10,7 @@ import torch
 from hubsgo_ppl.cli import main
 from hubsgo_ppl.experiments.io import load_checkpoint, save_torch
 from hubsgo_ppl.experiments.logger import read_csv_rows
-from hubsgo_ppl.diagnostics.review import (compare_couplings, format_chosen, human_edge_signs, marginal_trend,
+from hubsgo_ppl.diagnostics.review import (render_markdown, compare_couplings, format_chosen, human_edge_signs, marginal_trend,
                                            negative_edges_against_successes, prior_against_successes, review,
                                            held_up_by_edges, suggested_drops, suggested_links, suggested_spec)
 from hubsgo_ppl.experiments.run import RunConfig, RunError, load_run, train
@@ -107,6 +107,10 @@ def test_flagged_edges_and_drops_from_an_edited_critic(run, tmp_path):
     md = (run2 / "review" / "review.md").read_text()
     assert f"**edge {edges[0][0]} — {edges[0][1]}**" in md
     assert "**drop blue_key**" in md and "achieved on 75% of the recent successes (the successes need it" in md
+    assert ("What the recent successes achieved is read from the 4 the filter keeps. Only 4: a drop read from so few "
+            "can remove a route the agent still needs") in md
+    more = {**r, "achieved": {**r["achieved"], "recent_successes": {**succ, "episodes": 5}}}
+    assert "read from the 5 the filter keeps.\n" in render_markdown(more) and "Only 5" not in render_markdown(more)
 
 
 def test_second_review_trend_is_the_difference_of_marginals(run, tmp_path):
