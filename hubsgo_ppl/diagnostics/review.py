@@ -603,6 +603,9 @@ def render_markdown(r: dict[str, Any]) -> str:
         few = (f" Only {n_succ}: a drop read from so few can remove a route the agent still needs; if unsure, train on "
                f"and review again." if n_succ < FEW_SUCCESSES else "")
         changes = [f"What the recent successes achieved is read from the {n_succ} the filter keeps.{few}", "", *changes]
+    if not changes and not r.get("critic_updates", 1):
+        changes = ["None yet: the critic has not updated on this run (an outcome critic waits for the first success), "
+                   "so nothing it learned can weigh against your spec; train on and review after the first successes."]
     lines += changes or [f"None: every learned coupling agrees with your edge signs, and every sub-goal has "
                          f"P(w = 1) >= {r['threshold']:.2f}."]
     if "suggested_spec" in r["files"]:

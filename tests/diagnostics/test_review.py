@@ -392,6 +392,10 @@ def test_drops_before_the_critics_first_update_are_called_its_starting_values(ru
     assert "the critic has not updated on this run yet: this is its starting value (your spec's prior" in (tmp_path / "rv0" / "review.md").read_text()
     assert main(["review", str(run), "--out", str(tmp_path / "cli0"), "--no-gif", "--threshold", "0.5"]) == 0
     assert "(the critic has not updated on this run yet: its starting values, not what this run learned)" in capsys.readouterr().out
+    r = review(run, out=tmp_path / "rv_none", gif=False, threshold=0.0)        # nothing to suggest, and no evidence
+    md = (tmp_path / "rv_none" / "review.md").read_text()
+    assert not r["suggested_drops"] and "None yet: the critic has not updated on this run" in md
+    assert "every learned coupling agrees" not in md
     learned = _copy(run, tmp_path / "learned")
     _edit_critic(learned, theta={2: -6.0}, outcomes=[[1, 1, 0, 0, 1]])
     r = review(learned, out=tmp_path / "rv1", gif=False, threshold=0.5)
