@@ -8,7 +8,8 @@ script runs it. For each task with misleading sub-goals and each seed, at the ta
   successes achieved, with its edges; give each flagged edge its learned sign; with ``--unlink-held``
   also remove the positive edges that the review says hold a sub-goal in G* which most successes
   skipped; with ``--unlink-together`` also remove the negative edges whose two sub-goals every recent
-  success achieved), revise, continue to B;
+  success achieved; with ``--suggested`` the corrected spec is instead the review's own
+  ``suggested_spec.yaml``, which drops nothing before the critic's first update), revise, continue to B;
 - ``unrevised``: the same paused run (a copy taken before the revision) continued to B as it was;
 - ``restart``: a run from scratch with the corrected spec of the same seed, budget B.
 
@@ -121,13 +122,13 @@ def g_star(run: Path, task: str) -> dict[str, float]:
 
 def one(task: str, seed: int, out: Path, steps: int | None, overrides: list[str], threshold: float,
         keep_linked: bool = False, unlink_held: bool = False, unlink_together: bool = False,
-        model: str | None = None, drop_held: bool = False) -> list[dict]:
+        model: str | None = None, drop_held: bool = False, suggested: bool = False) -> list[dict]:
     """The three arms of one (task, seed); returns one result row per arm."""
     import torch
     import yaml
 
-    from hubsgo_ppl.diagnostics.review import review
-    from hubsgo_ppl.experiments.io import load_checkpoint
+    from hubsgo_ppl.diagnostics.review import review, suggested_spec
+    from hubsgo_ppl.experiments.io import load_checkpoint, write_yaml
     from hubsgo_ppl.experiments.revise import revise
     from hubsgo_ppl.experiments.run import RunConfig, resolve, train
 
@@ -152,7 +153,10 @@ def one(task: str, seed: int, out: Path, steps: int | None, overrides: list[str]
         shutil.copytree(runs["revised"], runs["unrevised"])
         r = review(runs["revised"], threshold=threshold, gif=False, num_samples=2_000)
         spec = load_checkpoint(runs["revised"] / "checkpoint.pt")["config"]["model_spec"]
-        corrected_spec(r, spec, spec_path, keep_linked, unlink_held, unlink_together, drop_held)
+        if suggested:           # the human revises with the review's suggested_spec.yaml as written
+            write_yaml(spec_path, suggested_spec(r, spec))
+        else:
+            corrected_spec(r, spec, spec_path, keep_linked, unlink_held, unlink_together, drop_held)
         revise(runs["revised"], spec_path, progress=False)
         train(RunConfig(task=task), runs["unrevised"], resume=True, progress=False)
     if not finished(runs["restart"]):
@@ -194,6 +198,9 @@ def main(argv: list[str] | None = None) -> int:
                    help="also remove the negative edges whose two sub-goals every recent success achieved")
     p.add_argument("--drop-held", action="store_true",
                    help="also drop the sub-goals positive edges hold in G* though most successes skipped them")
+    p.add_argument("--suggested", action="store_true",
+                   help="revise with the review's own suggested_spec.yaml (what review.md tells a user to pass to "
+                        "`hubsgo revise`) instead of the protocol's corrected spec; the other protocol options do not apply")
     p.add_argument("--model", help="the spec the run starts from, a path from the repository root with {task} "
                                    "(default: each task's built-in <task>-specific)")
     args = p.parse_args(argv)
@@ -210,9 +217,14 @@ def main(argv: list[str] | None = None) -> int:
         settings["drop_held"] = True
     if args.model:
         settings["model"] = args.model
+    if args.suggested:
+        if args.keep_linked or args.unlink_held or args.unlink_together or args.drop_held:
+            p.error("--suggested revises with the review's suggested spec; --keep-linked, --unlink-held, "
+                    "--unlink-together and --drop-held do not apply to it")
+        settings["suggested"] = True
     guard_settings(out, "measure_revise", settings)
     jobs = [(t, s, out, args.steps, overrides, args.threshold, args.keep_linked, args.unlink_held, args.unlink_together,
-             args.model, args.drop_held)
+             args.model, args.drop_held, args.suggested)
             for t in args.tasks for s in args.seeds]
     return finish(run_jobs(one, jobs, args.workers), out, summarise)
 

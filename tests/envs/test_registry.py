@@ -109,3 +109,26 @@ def test_critic_specs_match_the_catalogue(task):
     assert specs["fully_connected"]["edges"] == specs["specific"]["edges"]
     touched = {n for e in specs["specific"]["edges"] for n in e[:2]}
     assert touched == {n for n in names if not n.startswith("corner_")}
+
+
+def _shipped_specs() -> list[str]:
+    from hubsgo_ppl.resources import models_dir
+
+    return sorted(p.stem for p in models_dir().glob("*.yaml") if p.stem != "example-specific")   # no task: generic
+
+
+@pytest.mark.parametrize("name", _shipped_specs())
+def test_every_shipped_spec_resolves_for_its_task(name):
+    """Each file under models/ is named after itself, names a task that exists, and resolves for it as
+    `hubsgo train TASK --model NAME` would (sub-goals in the catalogue, edges between them, valid prior,
+    likelihood and inference)."""
+    import yaml
+
+    from hubsgo_ppl.experiments.run import RunConfig, resolve
+    from hubsgo_ppl.resources import models_dir
+
+    spec = yaml.safe_load((models_dir() / f"{name}.yaml").read_text())
+    assert spec["name"] == name
+    resolved = resolve(RunConfig(task=spec["task"], agent="hubsgo", model=name))
+    names = T.get_task(spec["task"]).catalogue.names
+    assert resolved["model"] == name and set(resolved["model_spec"]["subgoals"]) <= set(names)

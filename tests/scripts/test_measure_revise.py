@@ -129,3 +129,24 @@ def test_g_star_reads_whether_the_top_set_is_one_route(tmp_path):
     assert measure_revise.g_star(tmp_path / "route", "detour") == {"g_star_one_route": 1.0, "g_star_p": 0.5}
     assert measure_revise.g_star(tmp_path / "extra", "detour")["g_star_one_route"] == 0.0
     assert math.isnan(measure_revise.g_star(tmp_path / "route", "unknown_maze")["g_star_one_route"])
+
+
+def test_suggested_revises_with_the_reviews_own_suggested_spec_end_to_end(tmp_path, capsys):
+    """``--suggested``: the human passes the review's suggested_spec.yaml to ``hubsgo revise`` as written;
+    the three arms run, and the protocol's own corrections cannot be combined with it."""
+    import json
+
+    import yaml
+
+    out = tmp_path / "out"
+    assert measure_revise.main(["--out", str(out), "--smoke", "--suggested"]) == 0
+    base = out / "keydoor_incorrect" / "seed0"
+    review_dir = base / "revised" / "review"
+    assert yaml.safe_load((base / "corrected.yaml").read_text()) == yaml.safe_load((review_dir / "suggested_spec.yaml").read_text())
+    assert json.loads((out / "settings.json").read_text())["suggested"] is True
+    with (out / "results.csv").open(newline="") as f:
+        assert [r["arm"] for r in csv.DictReader(f)] == list(measure_revise.ARMS)
+    assert (base / "revised" / "revisions" / "001" / "spec_after.yaml").is_file()
+    with pytest.raises(SystemExit):
+        measure_revise.main(["--out", str(tmp_path / "other"), "--smoke", "--suggested", "--drop-held"])
+    assert "do not apply to it" in capsys.readouterr().err
