@@ -27,8 +27,8 @@ both reached it, with the seeds it was sooner, later and level in.
 Everything goes under ``--out``: one folder per task, seed and arm, ``results.csv`` (one row per run)
 and ``summary.md``. Re-running skips finished runs (the runs are ordinary run directories), so ``--out``
 remembers its settings (``settings.json``: ``--steps``, ``--set``, ``--threshold``, ``--keep-linked``,
-and ``--unlink-held`` and ``--unlink-together`` where given) and refuses other ones; more seeds or tasks
-may be added.
+and ``--unlink-held``, ``--unlink-together``, ``--drop-held``, ``--model`` and ``--suggested`` where
+given) and refuses other ones; more seeds or tasks may be added.
 
     .venv/bin/python scripts/measure_revise.py --out runs/measure_revise            # 2 tasks x 5 seeds, 40,000 steps
     .venv/bin/python scripts/measure_revise.py --out runs/smoke_revise --smoke        # a pipeline check in a minute
