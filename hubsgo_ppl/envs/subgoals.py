@@ -81,9 +81,24 @@ class Catalogue(StrictModel):
     def names(self) -> list[str]:
         return [sg.name for sg in self.subgoals]
 
-    def resolve(self, relative: str) -> Path:
-        """A path named in ``options`` (e.g. a layout file), relative to the catalogue's folder."""
-        return Path(self.source).parent / relative
+    def resolve(self, relative: str, key: str = "options.layout") -> Path:
+        """A file named in ``options`` at ``key`` (e.g. a layout), relative to the catalogue's folder.
+
+        Only that folder (and the folders below it) is read: an absolute path, or one that leads out of
+        it through ``..`` or a symbolic link, is a SpecError naming the catalogue and the key."""
+        folder = Path(self.source).parent
+        if Path(relative).is_absolute():
+            raise SpecError(f"{self.source}: {key}: {relative!r} is an absolute path; name a file in the "
+                            "catalogue's folder, relative to it")
+        path = folder / relative
+        try:
+            inside = path.resolve().is_relative_to(folder.resolve())
+        except (OSError, RuntimeError):         # a loop of symbolic links
+            inside = False
+        if not inside:
+            raise SpecError(f"{self.source}: {key}: {relative!r} leads out of the catalogue's folder; put "
+                            "the file in that folder (not a link to elsewhere) and name it relative to it")
+        return path
 
 
 def load_catalogue(path: str | Path) -> Catalogue:
