@@ -247,7 +247,7 @@ def plot_review_graph(r: dict[str, Any], path: Path) -> Path:
     import networkx as nx
     from matplotlib.lines import Line2D
 
-    from .plots import mrf_graph_figure
+    from .mrf_figure import mrf_graph_figure
     from ..experiments.io import atomic_path
 
     names = r["names"]
