@@ -119,6 +119,8 @@ def render_markdown(r: dict[str, Any]) -> str:
                   f"{Path(r.get('review_dir', '.')) / r['files']['suggested_spec']}{revise_flags(r)}`."]
 
     lines += ["", f"## G*: the most probable sub-goal sets ({r['num_samples']:,} critic samples)", "",
+              "P(sample): a set's frequency among the critic's MH samples; P(exact): its exact probability by "
+              "enumeration (blank where there are too many sub-goals to enumerate).", "",
               "| rank | P(sample) | P(exact) | sub-goals |", "|---:|---:|---:|---|"]
     for i, row in enumerate(r["ranking"], 1):
         exact = "" if row.get("exact_prob") is None else f"{row['exact_prob']:.4f}"
