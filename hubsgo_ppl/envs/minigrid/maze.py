@@ -46,7 +46,7 @@ target (``subgoal_target``) in the agent's frame, (ahead, to the right) over ``m
 window is the 7x7 cells around the agent, turned so that the agent faces up it: channel 0 is 1 where
 the agent cannot step (a wall, a closed door, a key or ball on the floor, outside the grid), channel 1
 where there is lava. Floats in [-1, 1]. Two tasks' observations mean the same when their catalogues
-list the same sub-goals in the same order.
+list the same sub-goals in the same order. :mod:`hubsgo_ppl.envs.minigrid.egocentric` builds it.
 
 ## Rewards
 
