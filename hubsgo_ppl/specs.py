@@ -39,8 +39,9 @@ def _loc(loc: tuple[Any, ...]) -> str:
     return out or "<top level>"
 
 
-def format_validation_error(source: str, err: ValidationError) -> str:
-    """Turn pydantic's error list into one line per problem: ``file: key: problem; fix``."""
+def format_validation_error(source: str, err: ValidationError, *, prefix: str = "") -> str:
+    """Turn pydantic's error list into one line per problem: ``file: key: problem; fix``. ``prefix`` is
+    the key every location is under (e.g. ``subgoals[2] (door).args`` for one sub-goal's arguments)."""
     lines = []
     for e in err.errors():
         loc = tuple(p for p in e["loc"] if not (isinstance(p, str) and p.startswith("function-")))
@@ -52,6 +53,8 @@ def format_validation_error(source: str, err: ValidationError) -> str:
         elif e["type"] == "value_error":        # our own validators' words, without pydantic's prefix
             msg = msg.removeprefix("Value error, ")
         where = _loc(loc)
+        if prefix:
+            where = prefix if not loc else f"{prefix}.{where}".replace(".[", "[")
         lines.append(f"{source}: {msg}" if where == "<top level>" and e["type"] == "value_error"
                      else f"{source}: {where}: {msg}")
     return "\n".join(lines)

@@ -15,7 +15,8 @@ PNG atomically (temp file + ``os.replace``) and returns the written path.
   i.e. the marginal P(w_i = 1) of Eq. 1, written on it) and of ``log_q`` with its HDI.
 - :func:`plot_mrf_graph`: the learned pairwise MRF of Eq. 1 (networkx): nodes sized and coloured
   by P(w_i = 1) with a colourbar, edges of width proportional to |J_uv| coloured by sign (positive
-  blue, negative orange, as in the paper's Fig. 4), nodes labelled with name and marginal.
+  blue, negative orange, as in the paper's Fig. 4), nodes labelled with name and marginal, edges with
+  their coupling where the label overlaps nothing (:mod:`hubsgo_ppl.diagnostics.mrf_figure`).
 - :func:`plot_marginals_history`: P(w_i = 1) against training step, one line per sub-goal.
 
 ArviZ 0.23 API (``az.plot_*(..., ax=/axes=)``); see :mod:`hubsgo_ppl.diagnostics.arviz` for what a
@@ -28,19 +29,17 @@ import contextlib
 import math
 import os
 import warnings
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
 import matplotlib
-import networkx as nx
 import numpy as np
-from matplotlib.cm import ScalarMappable
-from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
-from matplotlib.lines import Line2D
 
-from hubsgo_ppl.diagnostics.arviz import _check_edges, _check_names, _to_numpy, atomic_write, az, summary
+from hubsgo_ppl.diagnostics.arviz import _check_names, _to_numpy, atomic_write, az, summary
+from hubsgo_ppl.diagnostics.mrf_figure import (DPI, NEGATIVE_COLOR, POSITIVE_COLOR, ZERO_COLOR, edge_styles,
+                                               mrf_graph_figure, node_styles)
 
 __all__ = [
     "POSITIVE_COLOR",
@@ -58,14 +57,6 @@ __all__ = [
     "plot_marginals_history",
 ]
 
-#: Edge colours by sign of the coupling J (the paper's Fig. 4: positive blue, negative orange).
-POSITIVE_COLOR = "tab:blue"
-NEGATIVE_COLOR = "tab:orange"
-ZERO_COLOR = "0.6"
-#: Colour map of node marginals; fixed to [0, 1] so pictures of different runs compare.
-NODE_CMAP = "viridis"
-_DPI = 110
-
 
 @contextlib.contextmanager
 def _arviz_plot_warnings() -> Iterator[None]:
@@ -81,7 +72,7 @@ def _arviz_plot_warnings() -> Iterator[None]:
 
 
 def _save(fig: Figure, path: str | os.PathLike[str]) -> Path:
-    return atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=_DPI), suffix=".png")
+    return atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=DPI), suffix=".png")
 
 
 def _check_idata(idata: Any) -> None:
@@ -230,119 +221,6 @@ def plot_posterior(
     for ax in axes[total:]:
         ax.set_axis_off()
     return _save(fig, path)
-
-
-def node_styles(
-    marginals: Any, min_size: float = 300.0, max_size: float = 2400.0, cmap: str = NODE_CMAP
-) -> tuple[np.ndarray, np.ndarray]:
-    """Node areas (points^2) and RGBA colours for marginals P(w_i = 1).
-
-    Area grows linearly from ``min_size`` at P = 0 to ``max_size`` at P = 1 (so it stays visible at
-    0); colour is ``cmap`` on the fixed range [0, 1].
-    """
-    p = _to_numpy(marginals, "marginals").astype(np.float64)
-    if p.ndim != 1:
-        raise ValueError(f"marginals must be a 1-D array of P(w_i = 1), got shape {p.shape}")
-    if not np.isfinite(p).all() or (p < 0).any() or (p > 1).any():
-        raise ValueError(f"marginals must be probabilities in [0, 1], got {p.tolist()}")
-    if not 0 <= min_size <= max_size:
-        raise ValueError(f"need 0 <= min_size <= max_size, got {min_size}, {max_size}")
-    sizes = min_size + (max_size - min_size) * p
-    colors = matplotlib.colormaps[cmap](Normalize(0.0, 1.0)(p))
-    return sizes, np.asarray(colors)
-
-
-def edge_styles(couplings: Any, max_width: float = 6.0, min_width: float = 0.6) -> tuple[np.ndarray, list[str]]:
-    """Edge widths and colours for couplings J: width proportional to |J| (the largest |J| gets
-    ``max_width``; a floor of ``min_width`` keeps weak edges visible) and colour by sign
-    (:data:`POSITIVE_COLOR`, :data:`NEGATIVE_COLOR`, :data:`ZERO_COLOR` for J = 0)."""
-    j = _to_numpy(couplings, "couplings").astype(np.float64)
-    if j.ndim != 1:
-        raise ValueError(f"couplings must be a 1-D array with one J per edge, got shape {j.shape}")
-    if not np.isfinite(j).all():
-        raise ValueError(f"couplings must be finite, got {j.tolist()}")
-    if not 0 <= min_width <= max_width:
-        raise ValueError(f"need 0 <= min_width <= max_width, got {min_width}, {max_width}")
-    scale = np.abs(j).max() if j.size else 0.0
-    widths = max_width * np.abs(j) / scale if scale > 0 else np.zeros_like(j)
-    widths = np.maximum(widths, min_width)
-    colors = [POSITIVE_COLOR if x > 0 else NEGATIVE_COLOR if x < 0 else ZERO_COLOR for x in j]
-    return widths, colors
-
-
-def _coupling_values(couplings: Any, edges: list[tuple[str, str]]) -> np.ndarray:
-    if isinstance(couplings, Mapping):
-        # critic.factors()["pairwise"] is keyed by (u, v); accept either orientation.
-        vals = []
-        for u, v in edges:
-            if (u, v) in couplings:
-                vals.append(couplings[(u, v)])
-            elif (v, u) in couplings:
-                vals.append(couplings[(v, u)])
-            else:
-                raise ValueError(f"couplings has no value for edge ({u!r}, {v!r}); keys: {list(couplings)}")
-        return np.asarray([float(_to_numpy(x, "coupling")) for x in vals], dtype=np.float64)
-    j = _to_numpy(couplings, "couplings").astype(np.float64)
-    if j.shape != (len(edges),):
-        raise ValueError(f"couplings must hold one J per edge: expected shape ({len(edges)},), got {j.shape}")
-    return j
-
-
-def mrf_graph_figure(
-    names: Sequence[str],
-    marginals: Any,
-    edges: Sequence[Sequence[Any]],
-    couplings: Any,
-    title: str | None = None,
-) -> Figure:
-    """Build (without saving) the figure of :func:`plot_mrf_graph`.
-
-    Layout is circular in the given sub-goal order (deterministic, no seed needed).
-    """
-    p = _to_numpy(marginals, "marginals").astype(np.float64)
-    sizes, node_colors = node_styles(p)  # validates shape and range first
-    names = _check_names(names, p.shape[0])
-    pairs = _check_edges(edges, list(names))
-    j = _coupling_values(couplings, pairs)
-    widths, edge_colors = edge_styles(j)
-
-    graph = nx.Graph()
-    graph.add_nodes_from(names)
-    graph.add_edges_from(pairs)
-    pos = nx.circular_layout(list(names)) if len(names) > 1 else {names[0]: np.zeros(2)}
-
-    fig = Figure(figsize=(8, 7), layout="constrained")
-    ax = fig.add_subplot()
-    nx.draw_networkx_edges(
-        graph, pos, edgelist=pairs, width=widths.tolist(), edge_color=edge_colors, ax=ax
-    )
-    nx.draw_networkx_nodes(
-        graph, pos, nodelist=list(names), node_size=sizes, node_color=node_colors,
-        edgecolors="black", linewidths=0.8, ax=ax,
-    )
-    # Labels sit just outside the circle so long names do not cover nodes or edges.
-    label_pos = {n: np.asarray(xy) * 1.36 for n, xy in pos.items()}
-    nx.draw_networkx_labels(
-        graph, label_pos, labels={n: f"{n}\nP={pi:.2f}" for n, pi in zip(names, p)},
-        font_size=9, ax=ax,
-    )
-    nx.draw_networkx_edge_labels(
-        graph, pos, edge_labels={e: f"{x:+.2f}" for e, x in zip(pairs, j)}, font_size=8, ax=ax
-    )
-    fig.colorbar(ScalarMappable(Normalize(0.0, 1.0), NODE_CMAP), ax=ax, label="P(w_i = 1)", shrink=0.7)
-    ax.legend(
-        handles=[
-            Line2D([], [], color=POSITIVE_COLOR, lw=3, label="J > 0 (positive)"),
-            Line2D([], [], color=NEGATIVE_COLOR, lw=3, label="J < 0 (negative)"),
-        ],
-        loc="lower left", fontsize=8, frameon=False,
-    )
-    ax.set_xlim(-1.7, 1.7)
-    ax.set_ylim(-1.7, 1.7)
-    ax.set_aspect("equal")
-    ax.set_axis_off()
-    ax.set_title(title or "learned sub-goal MRF: node = P(w_i = 1), edge width = |J|")
-    return fig
 
 
 def plot_mrf_graph(

@@ -170,8 +170,14 @@ def record_episode(resolved: dict[str, Any], env: gym.Env, agent: Any, seed: int
 
 
 def _font(size: int):
+    """matplotlib's DejaVu Sans (it has the Ĝ of Ĝt, Pillow's own font does not), else Pillow's font."""
+    import matplotlib
     from PIL import ImageFont
 
+    try:
+        return ImageFont.truetype(str(Path(matplotlib.get_data_path()) / "fonts" / "ttf" / "DejaVuSans.ttf"), size)
+    except OSError:
+        pass
     try:
         return ImageFont.load_default(size=size)
     except TypeError:                      # Pillow < 10.1: the fixed bitmap font
@@ -201,12 +207,12 @@ def _caption(rec: Recording, i: int) -> str:
     if i == last:
         text += "  (success)" if rec.stats.success else "  (episode over, no success)"
     if ghat is None:
-        text += ("\nG_t = G0 (no critic update yet)" if rec.filter_name == "critic"
+        text += ("\nĜt = G0 (no critic update yet)" if rec.filter_name == "critic"
                  else "\nno filter: chooses from G0")
     elif not np.any(ghat):
-        text += "\nfilter G_t: {} (empty: chooses from G0)"
+        text += "\nĜt: {} (empty: chooses from G0)"
     else:
-        text += "\nfilter G_t: {" + ", ".join(n for n, m in zip(rec.names, ghat) if m) + "}"
+        text += "\nĜt: {" + ", ".join(n for n, m in zip(rec.names, ghat) if m) + "}"
     return text
 
 

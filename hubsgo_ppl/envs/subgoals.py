@@ -16,7 +16,7 @@ from pydantic import Field, field_validator
 
 from ..specs import SpecError, StrictModel, load_yaml, validate_spec
 
-__all__ = ["SubgoalDef", "Catalogue", "load_catalogue"]
+__all__ = ["SubgoalDef", "Catalogue", "load_catalogue", "file_in_folder"]
 
 
 class SubgoalDef(StrictModel):
@@ -81,9 +81,30 @@ class Catalogue(StrictModel):
     def names(self) -> list[str]:
         return [sg.name for sg in self.subgoals]
 
-    def resolve(self, relative: str) -> Path:
-        """A path named in ``options`` (e.g. a layout file), relative to the catalogue's folder."""
-        return Path(self.source).parent / relative
+    def resolve(self, relative: str, key: str = "options.layout") -> Path:
+        """A file named in ``options`` at ``key`` (e.g. a layout), in the catalogue's folder
+        (:func:`file_in_folder`)."""
+        return file_in_folder(self.source, relative, key)
+
+
+def file_in_folder(source: str | Path, relative: str, key: str) -> Path:
+    """The file ``relative`` names, relative to the folder of the catalogue ``source``.
+
+    Only that folder (and the folders below it) is read: an absolute path, or one that leads out of it
+    through ``..`` or a symbolic link, is a SpecError naming the catalogue and the key."""
+    folder = Path(source).parent
+    if Path(relative).is_absolute():
+        raise SpecError(f"{source}: {key}: {relative!r} is an absolute path; name a file in the catalogue's "
+                        "folder, relative to it")
+    path = folder / relative
+    try:
+        inside = path.resolve().is_relative_to(folder.resolve())
+    except (OSError, RuntimeError):         # a loop of symbolic links
+        inside = False
+    if not inside:
+        raise SpecError(f"{source}: {key}: {relative!r} leads out of the catalogue's folder; put the file in "
+                        "that folder (not a link to elsewhere) and name it relative to it")
+    return path
 
 
 def load_catalogue(path: str | Path) -> Catalogue:

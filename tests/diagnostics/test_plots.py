@@ -158,3 +158,37 @@ def test_marginals_history_figure_plots_each_subgoal_over_steps(tmp_path):
 def test_marginals_history_rejects_bad_input(steps, marginals, match):
     with pytest.raises(ValueError, match=match):
         marginals_history_figure(steps, marginals, NAMES)
+
+
+@pytest.mark.parametrize("model", ["keydoor-specific", "keydoor_n17-specific", "stack_cubes-fully_connected"])
+def test_coupling_labels_overlap_no_label_and_no_node_on_a_shipped_spec(model):
+    """Each coupling of a shipped spec is labelled on the graph, where its label overlaps no other label
+    (coupling or node name) and no node."""
+    import itertools
+
+    from hubsgo_ppl.diagnostics.mrf_figure import coupling_labels
+    from hubsgo_ppl.graph import SubgoalGraph
+    from hubsgo_ppl.specs import load_model_spec
+
+    spec = load_model_spec(model)
+    graph = SubgoalGraph(spec.subgoals, [(u, v, 0) for u, v, _ in spec.edges]).preset(spec.graph)
+    rng = np.random.default_rng(0)
+    marginals = rng.uniform(0.0, 1.0, len(spec.subgoals))
+    couplings = rng.uniform(-4.0, 4.0, graph.num_edges)
+    fig = mrf_graph_figure(spec.subgoals, marginals, graph.edges, couplings)
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    labels = coupling_labels(fig)
+    assert sorted(t.get_text() for t in labels) == sorted(f"{x:+.2f}" for x in couplings)
+    boxes = [t.get_window_extent(renderer) for t in labels]
+    assert not [(a, b) for a, b in itertools.combinations(boxes, 2) if a.overlaps(b)]
+    ax = fig.axes[0]
+    names = [t.get_window_extent(renderer) for t in ax.texts if t not in labels]
+    assert len(names) == len(spec.subgoals)
+    assert not [(a, b) for a in boxes for b in names if a.overlaps(b)]
+    nodes = next(c for c in ax.collections if isinstance(c, PathCollection))
+    centres = ax.transData.transform(nodes.get_offsets())
+    radii = np.sqrt(nodes.get_sizes()) / 2 * fig.dpi / 72
+    for box in boxes:
+        nearest = np.clip(centres, [box.x0, box.y0], [box.x1, box.y1])
+        assert (np.hypot(*(nearest - centres).T) >= radii).all()

@@ -81,11 +81,26 @@ def test_outlines_mark_the_current_subgoal_and_the_filters_set():
     assert edge(imgs[0], (3, 3)) == (0, 0, 0)           # not in Ĝt: no outline
     assert edge(imgs[2], (3, 1)) == CURRENT_COLOR and edge(imgs[2], (1, 1)) == GHAT_COLOR
     assert rec.decision_at(1)[0] == 0 and rec.decision_at(2)[:1] == (1,) and rec.decision_at(2)[2] == 2
-    assert _caption(rec, 0).splitlines()[1] == "filter G_t: {k, d}"
+    assert _caption(rec, 0).splitlines()[1] == "Ĝt: {k, d}"
     empty = Recording(["k", "d", "g"], frames, [np.zeros(3, bool)] * 3, targets, [(0, 0, np.zeros(3, bool))],
                       stats, env_seed=0, tile_size=t, filter_name="critic")
-    assert _caption(empty, 0).splitlines()[1] == "filter G_t: {} (empty: chooses from G0)"
+    assert _caption(empty, 0).splitlines()[1] == "Ĝt: {} (empty: chooses from G0)"
 
+
+
+def test_the_caption_font_draws_the_hat_of_g_hat_t():
+    from PIL import Image, ImageDraw
+
+    from hubsgo_ppl.diagnostics.render import _font
+
+    font = _font(14)
+
+    def drawn(text):
+        img = Image.new("L", (40, 24))
+        ImageDraw.Draw(img).text((2, 2), text, font=font, fill=255)
+        return np.asarray(img)
+
+    assert (drawn("Ĝ") != drawn("G")).any() and (drawn("Ĝ") != drawn("\U0010ffff")).any()  # not the missing glyph
 
 def _fake_run(tmp_path, **config):
     run = tmp_path / "fake"

@@ -326,17 +326,6 @@ class _GoalArgs(StrictModel):
     pass
 
 
-def _args_error(source: str, key: str, err: ValidationError) -> str:
-    lines = []
-    for e in err.errors():
-        loc = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in e["loc"])
-        msg = {"extra_forbidden": "unknown key; remove it or check its spelling",
-               "missing": "required key is missing; add it"}.get(e["type"], e["msg"])
-        msg = msg.removeprefix("Value error, ")          # our own validators' words, without pydantic's prefix
-        lines.append(f"{source}: {key}{loc}: {msg}")
-    return "\n".join(lines)
-
-
 _ARGS: dict[str, type[BaseModel]] = {"at": _AtArgs, "carrying": _CarryingArgs,
                                      "door_open": _DoorOpenArgs, "goal": _GoalArgs}
 
@@ -350,7 +339,7 @@ def _compile_predicate(i: int, sg: Any, lay: Layout, carry_kinds: tuple[tuple[st
     try:
         args = _ARGS[sg.kind].model_validate(sg.args)
     except ValidationError as err:
-        raise SpecError(_args_error(source, f"{key}.args", err)) from None
+        raise SpecError(format_validation_error(source, err, prefix=f"{key}.args")) from None
 
     def inside(cell: tuple[int, int], what: str) -> None:
         x, y = cell

@@ -46,7 +46,7 @@ target (``subgoal_target``) in the agent's frame, (ahead, to the right) over ``m
 window is the 7x7 cells around the agent, turned so that the agent faces up it: channel 0 is 1 where
 the agent cannot step (a wall, a closed door, a key or ball on the floor, outside the grid), channel 1
 where there is lava. Floats in [-1, 1]. Two tasks' observations mean the same when their catalogues
-list the same sub-goals in the same order.
+list the same sub-goals in the same order. :mod:`hubsgo_ppl.envs.minigrid.egocentric` builds it.
 
 ## Rewards
 
@@ -96,30 +96,12 @@ from minigrid.minigrid_env import MiniGridEnv
 
 from ...specs import SpecError
 from ..subgoals import Catalogue
+from . import egocentric
 from .layout import DIRECTIONS, MazeSpec, MazeState, load_maze_spec
 
 __all__ = ["MazeEnv"]
 
 _KIND_CODE = {"at": 0, "goal": 0, "carrying": 1, "door_open": 2}
-
-#: the egocentric window's side, in cells (the agent in its centre)
-_VIEW = 7
-#: MiniGrid's direction -> the unit step forward (0 right, 1 down, 2 left, 3 up; y grows downwards)
-_FORWARD = ((1, 0), (0, 1), (-1, 0), (0, -1))
-
-
-def _window_offsets(direction: int) -> tuple[np.ndarray, np.ndarray]:
-    """World (dx, dy) of each window cell, row by row from the farthest ahead, left to right as the
-    agent facing ``direction`` sees them; so every heading gives the same window for the same view."""
-    fx, fy = _FORWARD[direction]
-    rx, ry = -fy, fx                                  # the agent's right
-    r = _VIEW // 2
-    ahead, right = np.meshgrid(np.arange(r, -r - 1, -1), np.arange(-r, r + 1), indexing="ij")
-    return (ahead * fx + right * rx).reshape(-1), (ahead * fy + right * ry).reshape(-1)
-
-
-_WINDOW = tuple(_window_offsets(d) for d in range(4))
-
 
 def _compiled(predicates) -> tuple[tuple[int, tuple[int, int], int], ...]:
     return tuple((_KIND_CODE[p.kind], p.target, p.index) for p in predicates)
@@ -173,7 +155,7 @@ class MazeEnv(MiniGridEnv):
         self._off_door = self._off_carry + 1 + len(spec.carry_kinds)
         self._obs_dim = self._off_door + len(lay.doors)
         n_marks = len(spec.landmarks)
-        self._ego_dim = 1 + 3 * n_marks + 2 * _VIEW * _VIEW
+        self._ego_dim = egocentric.dim(n_marks)
         if self.obs_mode == "symbolic":
             self.observation_space = spaces.Box(0.0, 1.0, (self._obs_dim,), np.float32)
         elif self.obs_mode == "egocentric":
@@ -208,14 +190,7 @@ class MazeEnv(MiniGridEnv):
             self._img_static = self.grid.encode()
         if self.obs_mode == "egocentric":
             # walls and lava never move: one padded map per reset, the doors and objects patched per step
-            pad = _VIEW // 2
-            self._static = np.ones((2, width + 2 * pad, height + 2 * pad), np.float32)
-            self._static[1] = 0.0
-            self._static[0, pad:pad + width, pad:pad + height] = 0.0
-            for x, y in lay.walls:
-                self._static[0, x + pad, y + pad] = 1.0
-            for x, y in lay.lava:
-                self._static[1, x + pad, y + pad] = 1.0
+            self._static = egocentric.static_map(lay)
         self._doors, self._carriables = [], []
         for o in lay.objects:
             if o.type == "door":
@@ -237,7 +212,7 @@ class MazeEnv(MiniGridEnv):
     def gen_obs(self) -> np.ndarray:
         """The flat observation (replaces MiniGrid's own egocentric view, which we never use)."""
         if self.obs_mode == "egocentric":
-            return self._egocentric_obs()
+            return egocentric.observe(self)
         if self.obs_mode == "image":
             img = self._img_static.copy()
             for d in self._doors:
@@ -258,32 +233,6 @@ class MazeEnv(MiniGridEnv):
         for j, d in enumerate(self._doors):
             if d.is_open:
                 obs[self._off_door + j] = 1.0
-        return obs
-
-    def _egocentric_obs(self) -> np.ndarray:
-        n = len(self._marks)
-        obs = np.zeros(self._ego_dim, np.float32)
-        obs[0] = float(self.carrying is not None)
-        obs[1:1 + n] = self._achieved(self._marks)
-        ax, ay = self._agent_cell()
-        fx, fy = _FORWARD[self.agent_dir]
-        scale = float(max(self.width, self.height))
-        for i, pred in enumerate(self._marks):
-            tx, ty = self._target(pred)
-            dx, dy = tx - ax, ty - ay
-            # ahead = d . forward; right = d . (the forward vector turned clockwise on screen, y down)
-            obs[1 + n + 2 * i] = (dx * fx + dy * fy) / scale
-            obs[2 + n + 2 * i] = (-dx * fy + dy * fx) / scale
-        grid = self._static.copy()
-        pad = _VIEW // 2
-        for d in self._doors:
-            if not d.is_open:
-                grid[0, d.cur_pos[0] + pad, d.cur_pos[1] + pad] = 1.0
-        for obj in self._carriables:
-            if obj is not self.carrying and obj.cur_pos is not None and obj.cur_pos[0] >= 0:
-                grid[0, obj.cur_pos[0] + pad, obj.cur_pos[1] + pad] = 1.0
-        wx, wy = _WINDOW[self.agent_dir]
-        obs[1 + 3 * n:] = grid[:, wx + ax + pad, wy + ay + pad].reshape(-1)
         return obs
 
     # -- Gymnasium API ----------------------------------------------------------------------------
@@ -327,25 +276,6 @@ class MazeEnv(MiniGridEnv):
                 out[i] = self._doors[idx].is_open
         return out
 
-    def subgoal_possible(self) -> np.ndarray:
-        """Which catalogue predicates can still come to hold in this episode: bool array (N,).
-
-        Without a ``drop`` action an object once picked up stays held, so carrying another one, and
-        opening a locked door with another key, can no longer happen. Everything else counts as
-        possible (a cell behind a closed door may still be reached once it opens)."""
-        out = np.ones(len(self._preds), dtype=bool)
-        c = self.carrying
-        if c is None or "drop" in self.action_names:
-            return out
-        carried = self._carry_index[(c.type, c.color)]
-        for i, (code, _, idx) in enumerate(self._preds):
-            if code == 1:
-                out[i] = carried == idx + 1
-            elif code == 2:
-                door = self._doors[idx]
-                out[i] = door.is_open or not door.is_locked or (c.type == "key" and c.color == door.color)
-        return out
-
     def subgoal_target(self, i: int) -> tuple[int, int]:
         """The cell the low level should reach (``at``/``goal``) or face (a key or a door)."""
         if not 0 <= int(i) < len(self._preds):
@@ -375,7 +305,7 @@ class MazeEnv(MiniGridEnv):
         policies unchanged; walls are not taken into account (the layout stays the learner's to discover).
         """
         if self.obs_mode == "egocentric":
-            return self._egocentric_potential()
+            return egocentric.potential(self)
         if self.obs_mode != "symbolic":
             return None
         import torch
@@ -392,21 +322,6 @@ class MazeEnv(MiniGridEnv):
 
         return phi
 
-    def _egocentric_potential(self):
-        """phi for egocentric observations: the same Manhattan distance, read from the offsets (to
-        where each target is now: a carried key's is the agent's own cell)."""
-        import torch
-
-        marks = [p.name for p in self.spec_maze.landmarks]
-        n = len(marks)
-        cols = torch.tensor([1 + n + 2 * marks.index(name) for name in self.subgoal_names])
-        scale = float(max(self.width, self.height)) / float(self.width + self.height)
-
-        def phi(obs: "torch.Tensor") -> "torch.Tensor":
-            return -(obs[..., cols].abs() + obs[..., cols + 1].abs()) * scale
-
-        return phi
-
     def subgoal_features(self):
         """feat(obs) -> (..., N, F): what a goal-conditioned low level reads for each sub-goal, or None
         where the observation names absolute cells (symbolic and image).
@@ -417,26 +332,7 @@ class MazeEnv(MiniGridEnv):
         offsets are left out and nothing names i, so one network serves every sub-goal: a step towards
         the target's offset means the same for a key as for a door, on this layout or a moved one.
         """
-        if self.obs_mode != "egocentric":
-            return None
-        import torch
-
-        marks = [p.name for p in self.spec_maze.landmarks]
-        n = len(marks)
-        mark = torch.tensor([marks.index(name) for name in self.subgoal_names])
-        shared = torch.cat([torch.arange(0, 1 + n), torch.arange(1 + 3 * n, self._ego_dim)])
-        own = torch.stack([1 + mark, 1 + n + 2 * mark, 2 + n + 2 * mark], dim=1)       # (N, 3)
-        kind = torch.zeros(len(self._preds), 3)
-        kind[torch.arange(len(self._preds)), torch.tensor([code for code, _, _ in self._preds])] = 1.0
-        n_goals = len(self._preds)
-
-        def feat(obs: "torch.Tensor") -> "torch.Tensor":
-            base = obs[..., shared].unsqueeze(-2).expand(*obs.shape[:-1], n_goals, shared.numel())
-            return torch.cat([base, obs[..., own], kind.expand(*obs.shape[:-1], n_goals, 3)], dim=-1)
-
-        feat.dim = int(shared.numel()) + 6
-        feat.flag = int(shared.numel())     # the column of a row's own achievement flag
-        return feat
+        return egocentric.features(self) if self.obs_mode == "egocentric" else None
 
     def symbolic_state(self) -> MazeState:
         """The hashable full state (position, direction, carried object, object cells, door states)."""

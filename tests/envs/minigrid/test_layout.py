@@ -175,3 +175,32 @@ def test_spec_cache_sees_edited_layout(tmp_path):
     st = txt.stat()
     os.utime(txt, ns=(st.st_atime_ns, st.st_mtime_ns + 10_000_000))
     assert load_maze_spec(path).layout.goal == (2, 1)
+
+
+@pytest.mark.parametrize("how", ["up the tree", "absolute", "symbolic link"])
+def test_a_layout_is_read_only_from_the_catalogues_folder(tmp_path, capsys, how):
+    outside = tmp_path / "elsewhere" / "other.txt"
+    outside.parent.mkdir()
+    outside.write_text("#####\n#A.G#\n#####\n")          # a valid layout: only where it lies is wrong
+    folder = tmp_path / "task"
+    folder.mkdir()
+    if how == "symbolic link":
+        (folder / "link.txt").symlink_to(outside)
+    named = {"up the tree": "../elsewhere/other.txt", "absolute": str(outside), "symbolic link": "link.txt"}[how]
+    path = write_task(folder, options=f"layout: {named}\n", subgoals="  - {name: goal, kind: goal}\n")
+    with pytest.raises(SpecError) as exc:
+        load_maze_spec(path)
+    msg = str(exc.value)
+    assert "\n" not in msg and msg.startswith(f"{path}: options.layout: {named!r} ") and "catalogue's folder" in msg
+    # the command line refuses it in that one line, exit 2
+    from hubsgo_ppl.cli import main
+
+    assert main(["tasks", str(path)]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [f"hubsgo: error: {msg}"]
+
+
+def test_a_layout_in_a_folder_below_the_catalogue_is_read(tmp_path):
+    (tmp_path / "layouts").mkdir()
+    (tmp_path / "layouts" / "small.txt").write_text("#####\n#A.G#\n#####\n")
+    path = write_task(tmp_path, options="layout: layouts/./small.txt\n", subgoals="  - {name: goal, kind: goal}\n")
+    assert load_maze_spec(path).layout.goal == (3, 1)

@@ -262,31 +262,3 @@ def test_subgoal_potential_is_minus_manhattan_distance_to_each_target(task):
         if term or trunc:
             obs, _ = env.reset(seed=2)
     assert make(task, obs_mode="image").unwrapped.subgoal_potential() is None
-
-
-@pytest.mark.parametrize("task", ["keydoor", "vault", "threepair"])
-def test_subgoal_possible_is_what_a_plan_can_still_reach_once_a_key_is_held(task):
-    env = make(task)
-    u = env.unwrapped
-    names = u.subgoal_names
-    keys = [i for i, n in enumerate(names) if n.endswith("_key")]
-    assert len(keys) >= 2
-    for key in keys:
-        env.reset(seed=0)
-        assert u.subgoal_possible().all()                 # nothing held: nothing ruled out
-        for action in bfs.plan_or_none(u, key):
-            env.step(action)
-        assert u.subgoal_achieved()[key]
-        possible, achieved = u.subgoal_possible(), u.subgoal_achieved()
-        assert not possible.all()                          # the other keys at least
-        for j, name in enumerate(names):
-            if not achieved[j]:                            # every action allowed, doors opened on the way
-                assert possible[j] == _reachable(u, j), (task, names[key], name)
-
-
-def _reachable(env, subgoal):
-    try:
-        bfs.plan(env, subgoal)
-    except ValueError:
-        return False
-    return True
