@@ -80,3 +80,12 @@ def test_no_page_cites_a_commit(page):
     text = page.read_text(encoding="utf-8")
     assert not HASH.findall(text)
     assert "code version" not in text
+
+
+def test_the_td_critic_snippet_of_docs_critic_puts_the_two_routes_on_top(tmp_path, monkeypatch):
+    snippet, = blocks("python", ROOT / "docs" / "critic.md")
+    monkeypatch.chdir(tmp_path)
+    scope: dict = {}
+    exec(compile(snippet, "docs/critic.md", "exec"), scope)
+    top = [frozenset(r["subgoals"]) for r in scope["critic"].ranking(num_samples=10_000, top_k=2)]
+    assert set(top) == {frozenset({"yellow_key", "yellow_door", "goal"}), frozenset({"blue_key", "blue_door", "goal"})}
