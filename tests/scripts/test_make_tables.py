@@ -46,8 +46,8 @@ def test_every_hubsgo_command_parses(command):
 
     try:
         build_parser().parse_args(_words(command)[1:])
-    except SystemExit as exc:     # argparse's way of refusing
-        pytest.fail(f"hubsgo refuses the arguments of `{command}` (exit {exc.code})")
+    except (SystemExit, ValueError) as exc:     # argparse's exit, or the CLI's one-line usage error
+        pytest.fail(f"hubsgo refuses the arguments of `{command}`: {exc}")
 
 
 @pytest.mark.parametrize("command", [c for c in make_tables.commands(RESULTS) if c.startswith("python ")])
