@@ -38,3 +38,9 @@ bench: $(STAMP)
 
 clean:
 	rm -rf $(VENV) build *.egg-info
+
+# Re-make every table of docs/results.md: the commands the page quotes, in its order (days on 2 cores;
+# `python scripts/make_tables.py --dry-run` lists them, `--start K` goes on from command K).
+.PHONY: tables
+tables: $(STAMP)
+	$(BIN)/python scripts/make_tables.py
