@@ -282,6 +282,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
           f"(already done), {result['retried']} retried, {len(result['failed'])} failed")
     for f in result["failed"]:
         print(f"  failed: {f}")
+    if any(status == "refused" for status in result["runs"].values()):
+        return 2            # a run folder train refuses: the user's to fix, as `hubsgo train` says it
     return 1 if result["failed"] else 0
 
 

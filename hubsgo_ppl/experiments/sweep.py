@@ -22,7 +22,11 @@ the working directory, and the column's folder is the file's stem (``lab``).
 Run ``(task, variant, seed)`` writes ``SWEEP_DIR/<task>/<variant>/seed<seed>`` through
 :func:`hubsgo_ppl.experiments.run.train`, each in its own worker process (spawned, one torch thread).
 Re-running a sweep skips finished runs (checkpoint ``env_steps`` ≥ budget), resumes interrupted ones
-from their checkpoint, and retries a crashed run once before reporting it as failed.
+from their checkpoint, and retries a crashed run once before reporting it as failed. A run folder is
+resumed or started afresh by ``train`` itself, with its guards: only the files ``train`` writes
+(``RUN_FILES``) are removed, a folder whose logs show a lost checkpoint is refused, and a refused run
+is reported in one line without a retry. A sweep's ``name`` is a plain folder name, so that its
+default folder ``runs/sweeps/NAME`` stays under ``runs/sweeps``.
 """
 
 from __future__ import annotations
@@ -30,7 +34,6 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import re
-import shutil
 import signal
 import time
 import traceback
@@ -135,13 +138,22 @@ class Variant(StrictModel):
 
 
 class SweepSpec(StrictModel):
-    name: str
+    name: str = Field(description="the sweep's folder name under runs/sweeps (letters, digits, '-', '_', '.')")
     table: Literal["table1", "table2"] | None = None
     seeds: list[int] = Field(min_length=1)
     checkpoint_steps: int = Field(default=CHECKPOINT_STEPS, gt=0)
     overrides: list[str] = Field(default_factory=list)
     tasks: list[TaskEntry] = Field(min_length=1)
     variants: list[Variant] = Field(min_length=1)
+
+    @field_validator("name")
+    @classmethod
+    def _folder_name_ok(cls, v: str) -> str:
+        if not _NAME.match(v):
+            shown = v if len(v) <= 60 else v[:57] + "..."
+            raise ValueError(f"{shown!r} is not a plain folder name (no '..', '/' or absolute path: the sweep is "
+                             "written to runs/sweeps/NAME); use letters, digits, '-', '_' or '.'")
+        return v
 
     @field_validator("seeds")
     @classmethod
@@ -272,9 +284,9 @@ def run_job(job: Job) -> dict[str, Any]:
 
     torch.set_num_threads(1)
     out = Path(job.out)
+    # train() resumes from the checkpoint, or starts a folder without one afresh through its own guards:
+    # it removes only the files it writes (RUN_FILES) and refuses a folder whose logs outlived a checkpoint
     resume = (out / CHECKPOINT).is_file()
-    if not resume and out.exists():
-        shutil.rmtree(out)          # an attempt that died before its first checkpoint: nothing to keep
     hook = None
     if os.environ.get(KILL_ENV) == job.run_id:
         ckpt = out / CHECKPOINT
@@ -285,6 +297,8 @@ def run_job(job: Job) -> dict[str, Any]:
                 os.kill(os.getpid(), signal.SIGKILL)
     try:
         summary = train(RunConfig(**job.config), out, resume=resume, progress=False, on_episode=hook)
+    except (RunError, CheckpointError, SpecError) as exc:   # a refusal: the same again on a retry
+        return {"ok": False, "refused": True, "error": " ".join(str(exc).split())}
     except BaseException as exc:  # noqa: BLE001 - reported to the parent, which decides about retries
         return {"ok": False, "error": f"{type(exc).__name__}: {exc}".strip(), "trace": traceback.format_exc()}
     ok = bool(summary["finished"])
@@ -384,7 +398,8 @@ def run_sweep(sweep: str | Path, backend: str = "local", workers: int = 2, out: 
 
     ``finished`` counts runs completed by this call, ``skipped`` runs that were already complete,
     ``retried`` runs that crashed once and were run again, ``failed`` the ``"run_id: error"`` of runs
-    that crashed twice. ``runs`` maps every run id to its final status.
+    that crashed twice, or ``"run_id: refused: why"`` of runs whose folder ``train`` refused (not
+    retried). ``runs`` maps every run id to its final status.
     """
     if backend not in ("local", "ray"):
         raise RunError(f"unknown backend {backend!r}; use 'local' or 'ray'")
@@ -415,6 +430,11 @@ def run_sweep(sweep: str | Path, backend: str = "local", workers: int = 2, out: 
         if res["ok"]:
             result["finished"] += 1
             result["runs"][job.run_id] = "finished"
+            if bar is not None:
+                bar.update(1)
+        elif res.get("refused"):
+            result["failed"].append(f"{job.run_id}: refused: {res['error']}")
+            result["runs"][job.run_id] = "refused"
             if bar is not None:
                 bar.update(1)
         else:
