@@ -39,7 +39,7 @@ import time
 import traceback
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, ClassVar, Literal
 
 from pydantic import Field, field_validator, model_validator
 
@@ -138,6 +138,9 @@ class Variant(StrictModel):
 
 
 class SweepSpec(StrictModel):
+    spec_kind: ClassVar[str] = "sweep file"
+    spec_example: ClassVar[str] = "sweeps/quick.yaml"
+
     name: str = Field(description="the sweep's folder name under runs/sweeps (letters, digits, '-', '_', '.')")
     table: Literal["table1", "table2"] | None = None
     seeds: list[int] = Field(min_length=1)
@@ -200,7 +203,7 @@ def load_sweep(sweep: str | Path) -> tuple[SweepSpec, Path]:
     if not path.is_file():
         shipped = sorted(p.stem for p in sweeps_dir().glob("*.yaml"))
         raise SpecError(f"{sweep}: no such sweep file; pass a path or one of: {', '.join(shipped)}")
-    spec = validate_spec(SweepSpec, load_yaml(path), source=str(path))
+    spec = validate_spec(SweepSpec, load_yaml(path, what=SweepSpec.spec_kind), source=str(path))
     from ..envs import get_task
 
     base = path.parent
