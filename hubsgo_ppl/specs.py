@@ -13,7 +13,6 @@ of a spec are shown shortened (:mod:`hubsgo_ppl.validation`).
 from __future__ import annotations
 
 import difflib
-import math
 from pathlib import Path
 from typing import Any, ClassVar, TypeVar
 
@@ -64,8 +63,8 @@ def load_yaml(path: str | Path, what: str = "spec") -> dict[str, Any]:
     try:
         data = yaml.load(path.read_text(encoding="utf-8"), Loader=_UniqueKeyLoader)
     except UnicodeDecodeError as exc:
-        raise SpecError(f"{path}: not UTF-8 text (byte {exc.start}), so not a {what}; a {what} is a YAML "
-                        "mapping of keys, saved as UTF-8") from None
+        raise SpecError(f"{path}: not UTF-8 text (byte {exc.start}); save it as UTF-8 (a {what} is a YAML mapping "
+                        "of keys)") from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark is not None else ""
