@@ -19,7 +19,7 @@ from typing import Any, ClassVar, TypeVar
 import yaml
 from pydantic import BaseModel, ConfigDict, ValidationError
 
-from .validation import KEY_CHARS, format_validation_error, shorten
+from .validation import KEY_CHARS, VALUE_CHARS, format_validation_error, shorten
 
 __all__ = ["SpecError", "StrictModel", "load_yaml", "validate_spec", "format_validation_error"]
 
@@ -171,8 +171,8 @@ def _numbers_in_range(kind: str, v: ComponentSpec) -> ComponentSpec:
         except ValueError:
             continue
         if not (x == 0 or lo <= x <= hi):       # NaN fails both
-            raise ValueError(f"{v.name!r}: {key} = {value!r} is out of range; give a number between "
-                             f"{lo:g} and {hi:g} in size, or 0")
+            raise ValueError(f"{v.name!r}: {key} = {shorten(repr(value), VALUE_CHARS)} is out of range; give a "
+                             f"number between {lo:g} and {hi:g} in size, or 0")
     return v
 
 
@@ -217,7 +217,8 @@ class ModelSpec(StrictModel):
         from .infer.priors import PRIORS
 
         if v.name not in PRIORS:
-            raise ValueError(f"unknown prior {v.name!r}; registered: {', '.join(sorted(PRIORS))}")
+            name = shorten(repr(v.name), KEY_CHARS)
+            raise ValueError(f"unknown prior {name}; registered: {', '.join(sorted(PRIORS))}")
         return _numbers_in_range("prior", v)
 
     @field_validator("likelihood")
@@ -255,8 +256,8 @@ class ModelSpec(StrictModel):
         try:
             prior = get_prior(self.prior.name, SubgoalGraph(self.subgoals), **self.prior.params())
         except (TypeError, ValueError) as exc:     # a parameter of the wrong type (text or a list for a number)
-            raise ValueError(f"prior {self.prior.name!r} {self.prior.params()}: {exc}; give each parameter a "
-                             "number") from None
+            params = shorten(str(self.prior.params()), VALUE_CHARS)
+            raise ValueError(f"prior {self.prior.name!r} {params}: {exc}; give each parameter a number") from None
         if "init" not in self.inference.model_fields_set:    # left out: start at the prior where the guide can
             self.inference.init = "prior" if prior.natural_params() is not None else "edges"
         return self
