@@ -66,9 +66,7 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--restart-schedules", action="store_true",
                    help="with --init-from: start the transferred parts' exploration schedules afresh (default: "
                         "where the source run left them)")
-    t.add_argument("--no-progress", action="store_true",
-                   help="no progress bar (it shows ret and succ, the mean return and success of the last 20 "
-                        "episodes; eps, the filter probability; critic, the critic's loss)")
+    t.add_argument("--no-progress", action="store_true", help="no progress bar")
     t.set_defaults(func=training.cmd_train)
 
     rv = sub.add_parser("revise", help="continue a HUBS-GO run with a revised critic spec (add or drop sub-goals, "
