@@ -45,6 +45,7 @@ from pydantic import Field, field_validator, model_validator
 
 from ..resources import sweeps_dir
 from ..specs import SpecError, StrictModel, load_yaml, validate_spec
+from ..validation import VALUE_CHARS, shorten
 from .io import CheckpointError, load_checkpoint, write_yaml
 from .run import CHECKPOINT, CHECKPOINT_STEPS, RunConfig, RunError
 
@@ -153,8 +154,7 @@ class SweepSpec(StrictModel):
     @classmethod
     def _folder_name_ok(cls, v: str) -> str:
         if not _NAME.match(v):
-            shown = v if len(v) <= 60 else v[:57] + "..."
-            raise ValueError(f"{shown!r} is not a plain folder name (no '..', '/' or absolute path: the sweep is "
+            raise ValueError(f"{shorten(repr(v), VALUE_CHARS)} is not a plain folder name (no '..', '/' or absolute path: the sweep is "
                              "written to runs/sweeps/NAME); use letters, digits, '-', '_' or '.'")
         return v
 
