@@ -2,9 +2,11 @@
 
 import csv
 import json
+import os
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 import torch
@@ -760,12 +762,11 @@ def test_every_option_of_every_command_has_help():
 def test_the_cli_package_loads_nothing_heavy_and_no_module_is_long():
     """Importing the entry point loads only the standard library (the commands import what they use when they
     run), so Ctrl-C during start-up reaches main's handler; and each module of the package stays short."""
-    from pathlib import Path
-
     import hubsgo_ppl.cli as cli
 
     code = "import sys, hubsgo_ppl.cli; print(sorted(m for m in ('numpy', 'torch', 'pydantic') if m in sys.modules))"
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                         cwd=Path(cli.__file__).parents[2])
     assert out.returncode == 0 and out.stdout.strip() == "[]", out.stdout + out.stderr
     for module in Path(cli.__file__).parent.glob("*.py"):
         assert len(module.read_text().splitlines()) <= 450, module.name
@@ -791,8 +792,10 @@ def test_ctrl_c_anywhere_is_one_line_and_exit_2(module, name, argv, tmp_path):
     (tmp_path / "runs" / "x").mkdir(parents=True)
     (tmp_path / "runs" / "x" / "subgoals.json").write_text(json.dumps(
         {"num_samples": 10, "marginals": {"a": 0.5}, "ranking": [{"subgoals": ["a"], "prob": 0.5}]}))
+    root = str(Path(__file__).resolve().parents[1])        # this checkout's package, from any folder
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p)}
     res = subprocess.run([sys.executable, "-c", _INTERRUPT.format(module=module, name=name, argv=argv)],
-                         cwd=tmp_path, capture_output=True, text=True, timeout=120)
+                         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
     assert res.returncode == 2, res.stderr
     assert res.stderr.strip() == f"hubsgo: interrupted (Ctrl-C) during `hubsgo {argv[0]}`", res.stderr
 

@@ -211,7 +211,7 @@ def test_a_sweep_name_must_be_a_plain_folder_name(tmp_path, name):
 
 
 def test_a_run_folder_without_a_checkpoint_keeps_the_files_the_tool_did_not_write(tmp_path):
-    from hubsgo_ppl.experiments.sweep import run_job
+    from hubsgo_ppl.experiments.sweep_workers import run_job
 
     path = _write(tmp_path)
     job = plan(load_sweep(path)[0], tmp_path / "sweep")[0]
