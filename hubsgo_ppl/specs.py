@@ -5,17 +5,21 @@ Every spec error is a :class:`SpecError` whose message names the file, the key a
     models/keydoor.yaml: edges[2]: 'blue_dor' is not in subgoals; subgoals lists 'blue_door': correct ...
 
 Specs are strict (unknown keys are errors), following Pyro's habit of rejecting unrecognised options.
+An error never prints back a file that is not a spec: a file that is not a YAML mapping, or whose
+keys are none of the spec's, gets one line naming the file and what the spec is; the keys and values
+of a spec are shown shortened (:mod:`hubsgo_ppl.validation`).
 """
 
 from __future__ import annotations
 
 import difflib
-import math
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, ClassVar, TypeVar
 
 import yaml
 from pydantic import BaseModel, ConfigDict, ValidationError
+
+from .validation import KEY_CHARS, VALUE_CHARS, format_validation_error, shorten
 
 __all__ = ["SpecError", "StrictModel", "load_yaml", "validate_spec", "format_validation_error"]
 
@@ -27,37 +31,13 @@ class SpecError(ValueError):
 
 
 class StrictModel(BaseModel):
-    """Base for spec objects: unknown keys are rejected, values are validated on assignment."""
+    """Base for spec objects: unknown keys are rejected, values are validated on assignment.
+    ``spec_kind`` names what a file of this model is, and ``spec_example`` points at one, in the line
+    that refuses a file that is not one."""
 
     model_config = ConfigDict(extra="forbid", validate_assignment=True, frozen=False)
-
-
-def _loc(loc: tuple[Any, ...]) -> str:
-    out = ""
-    for part in loc:
-        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
-    return out or "<top level>"
-
-
-def format_validation_error(source: str, err: ValidationError, *, prefix: str = "") -> str:
-    """Turn pydantic's error list into one line per problem: ``file: key: problem; fix``. ``prefix`` is
-    the key every location is under (e.g. ``subgoals[2] (door).args`` for one sub-goal's arguments)."""
-    lines = []
-    for e in err.errors():
-        loc = tuple(p for p in e["loc"] if not (isinstance(p, str) and p.startswith("function-")))
-        msg = e["msg"]
-        if e["type"] == "extra_forbidden":
-            msg = "unknown key; remove it or check its spelling"
-        elif e["type"] == "missing":
-            msg = "required key is missing; add it"
-        elif e["type"] == "value_error":        # our own validators' words, without pydantic's prefix
-            msg = msg.removeprefix("Value error, ")
-        where = _loc(loc)
-        if prefix:
-            where = prefix if not loc else f"{prefix}.{where}".replace(".[", "[")
-        lines.append(f"{source}: {msg}" if where == "<top level>" and e["type"] == "value_error"
-                     else f"{source}: {where}: {msg}")
-    return "\n".join(lines)
+    spec_kind: ClassVar[str] = "spec"
+    spec_example: ClassVar[str] = ""
 
 
 class _UniqueKeyLoader(yaml.SafeLoader):
@@ -69,34 +49,50 @@ class _UniqueKeyLoader(yaml.SafeLoader):
             key = self.construct_object(key_node, deep=deep)
             if key in seen:
                 raise yaml.constructor.ConstructorError(
-                    None, None, f"duplicate key {key!r}: give each key once", key_node.start_mark)
+                    None, None, f"duplicate key {shorten(repr(key), KEY_CHARS)}: give each key once",
+                    key_node.start_mark)
             seen.add(key)
         return super().construct_mapping(node, deep=deep)
 
 
-def load_yaml(path: str | Path) -> dict[str, Any]:
-    """Read a YAML mapping, with errors that name the file."""
+def load_yaml(path: str | Path, what: str = "spec") -> dict[str, Any]:
+    """Read a YAML mapping, with errors that name the file and say what a ``what`` is, never its content."""
     path = Path(path)
     if not path.is_file():
-        raise SpecError(f"{path}: no such spec file; check the path or use a built-in name")
+        raise SpecError(f"{path}: no such {what} file; check the path or use a built-in name")
     try:
         data = yaml.load(path.read_text(encoding="utf-8"), Loader=_UniqueKeyLoader)
     except UnicodeDecodeError as exc:
-        raise SpecError(f"{path}: not UTF-8 text (byte {exc.start}); save it as UTF-8") from None
+        raise SpecError(f"{path}: not UTF-8 text (byte {exc.start}); save it as UTF-8 (a {what} is a YAML mapping "
+                        "of keys)") from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark is not None else ""
-        what = getattr(exc, "problem", None) or " ".join(str(exc).split())
+        what_went_wrong = getattr(exc, "problem", None) or " ".join(str(exc).split())
         context = getattr(exc, "context", None)
-        raise SpecError(f"{path}: not valid YAML ({where}{what}{', ' + context if context else ''}); "
-                        "fix the syntax") from None
+        said = shorten(f"{what_went_wrong}{', ' + context if context else ''}", 100)   # YAML quotes the file
+        raise SpecError(f"{path}: not valid YAML ({where}{said}); fix the syntax (a {what} is a YAML mapping "
+                        "of keys)") from None
     if not isinstance(data, dict):
-        raise SpecError(f"{path}: <top level>: expected a mapping of keys, got {type(data).__name__}")
+        held = {str: "text", list: "a list", type(None): "nothing"}.get(type(data), type(data).__name__)
+        raise SpecError(f"{path}: not a {what}: a {what} is a YAML mapping of keys, and this file holds {held}; "
+                        "check the path")
     return data
 
 
+def _not_a_spec(cls: type[BaseModel], source: str) -> str:
+    kind = getattr(cls, "spec_kind", "spec")
+    example = getattr(cls, "spec_example", "")
+    keys = [name for name, field in cls.model_fields.items() if not field.exclude]
+    return (f"{source}: not a {kind}: a {kind} is a YAML mapping with the keys {', '.join(keys)}, "
+            f"and this file has none of them{f' ({example} is an example)' if example else ''}; check the path")
+
+
 def validate_spec(cls: type[M], data: dict[str, Any], source: str = "<spec>") -> M:
-    """Validate ``data`` into ``cls``; raise :class:`SpecError` naming ``source`` and each bad key."""
+    """Validate ``data`` into ``cls``; raise :class:`SpecError` naming ``source`` and each bad key. A
+    mapping none of whose keys is one of ``cls``'s is not a spec: one line says so, naming none of them."""
+    if isinstance(data, dict) and data and not any(isinstance(k, str) and k in cls.model_fields for k in data):
+        raise SpecError(_not_a_spec(cls, source))
     try:
         return cls.model_validate(data)
     except ValidationError as err:
@@ -175,8 +171,8 @@ def _numbers_in_range(kind: str, v: ComponentSpec) -> ComponentSpec:
         except ValueError:
             continue
         if not (x == 0 or lo <= x <= hi):       # NaN fails both
-            raise ValueError(f"{v.name!r}: {key} = {value!r} is out of range; give a number between "
-                             f"{lo:g} and {hi:g} in size, or 0")
+            raise ValueError(f"{v.name!r}: {key} = {shorten(repr(value), VALUE_CHARS)} is out of range; give a "
+                             f"number between {lo:g} and {hi:g} in size, or 0")
     return v
 
 
@@ -188,6 +184,9 @@ class ModelSpec(StrictModel):
     parameters, as bernoulli and ising do), ``edges`` otherwise; every other inference setting keeps
     its :class:`InferenceSpec` default.
     """
+
+    spec_kind: ClassVar[str] = "critic spec"
+    spec_example: ClassVar[str] = "models/keydoor-specific.yaml"
 
     name: str
     task: str | None = None
@@ -218,7 +217,8 @@ class ModelSpec(StrictModel):
         from .infer.priors import PRIORS
 
         if v.name not in PRIORS:
-            raise ValueError(f"unknown prior {v.name!r}; registered: {', '.join(sorted(PRIORS))}")
+            name = shorten(repr(v.name), KEY_CHARS)
+            raise ValueError(f"unknown prior {name}; registered: {', '.join(sorted(PRIORS))}")
         return _numbers_in_range("prior", v)
 
     @field_validator("likelihood")
@@ -256,8 +256,8 @@ class ModelSpec(StrictModel):
         try:
             prior = get_prior(self.prior.name, SubgoalGraph(self.subgoals), **self.prior.params())
         except (TypeError, ValueError) as exc:     # a parameter of the wrong type (text or a list for a number)
-            raise ValueError(f"prior {self.prior.name!r} {self.prior.params()}: {exc}; give each parameter a "
-                             "number") from None
+            params = shorten(str(self.prior.params()), VALUE_CHARS)
+            raise ValueError(f"prior {self.prior.name!r} {params}: {exc}; give each parameter a number") from None
         if "init" not in self.inference.model_fields_set:    # left out: start at the prior where the guide can
             self.inference.init = "prior" if prior.natural_params() is not None else "edges"
         return self
@@ -302,7 +302,7 @@ def load_model_spec(name_or_path: str | Path, graph: str | None = None) -> Model
             raise SpecError(f"{path}: no such spec file; check the path or use a built-in name: {', '.join(list_model_specs())}")
         else:
             raise SpecError(f"{name_or_path}: unknown model spec; use a path or one of: {', '.join(list_model_specs())}")
-    data = load_yaml(path)
+    data = load_yaml(path, what=ModelSpec.spec_kind)
     if graph is not None:
         data = {**data, "graph": graph}
     return validate_spec(ModelSpec, data, source=str(path))

@@ -2,9 +2,11 @@
 
 import csv
 import json
+import os
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 import torch
@@ -57,14 +59,14 @@ def test_train_subgoals_evaluate_round_trip(tmp_path, capsys):
 
 
 def test_an_empty_most_probable_set_is_explained_under_the_table():
-    from hubsgo_ppl.cli import _fmt_ranking
+    from hubsgo_ppl.cli.show import format_ranking
 
     table = {"num_samples": 10, "marginals": {"a": 0.1, "b": 0.2},
              "ranking": [{"subgoals": [], "prob": 0.7}, {"subgoals": ["a"], "prob": 0.1}]}
-    text = _fmt_ranking(table)
+    text = format_ranking(table)
     assert text.splitlines()[-1].startswith("the most probable set is empty: no sub-goal's evidence outweighs")
     table["ranking"].reverse()
-    assert "the most probable set is empty" not in _fmt_ranking(table)
+    assert "the most probable set is empty" not in format_ranking(table)
 
 
 @pytest.mark.parametrize("argv, needle", [
@@ -557,12 +559,12 @@ def test_a_damaged_run_file_gets_one_line_or_is_read_around(tiny_run, tmp_path, 
 
 
 def test_an_error_no_check_names_gets_one_line_and_its_traceback_on_request(monkeypatch, capsys):
-    import hubsgo_ppl.cli as cli
+    from hubsgo_ppl.cli import tasks
 
     def broken(args):
         raise ZeroDivisionError("float division by zero")
 
-    monkeypatch.setattr(cli, "cmd_tasks", broken)
+    monkeypatch.setattr(tasks, "cmd_tasks", broken)
     monkeypatch.delenv("HUBSGO_TRACEBACK", raising=False)
     assert main(["tasks"]) == 1
     line = _one_error_line(capsys)
@@ -574,12 +576,12 @@ def test_an_error_no_check_names_gets_one_line_and_its_traceback_on_request(monk
 
 
 def test_a_folder_that_cannot_be_written_gets_one_line_naming_the_file(monkeypatch, capsys):
-    import hubsgo_ppl.cli as cli
+    from hubsgo_ppl.cli import tasks
 
     def denied(args):
         raise PermissionError(1, "Operation not permitted", "runs/kd/.eval.json.b1a5.tmp")
 
-    monkeypatch.setattr(cli, "cmd_tasks", denied)
+    monkeypatch.setattr(tasks, "cmd_tasks", denied)
     assert main(["tasks"]) == 2
     assert _one_error_line(capsys) == ("hubsgo: error: runs/kd/.eval.json.b1a5.tmp: Operation not permitted; check the "
                                       "folder's permissions and free space")
@@ -739,3 +741,83 @@ def test_a_run_read_after_its_layout_changed_says_so_rather_than_call_the_checkp
     assert err[0].startswith("hubsgo: warning: ") and "has changed since the run recorded it" in err[0]
     assert err[1].endswith("which has changed since the run recorded it; put the catalogue and its layout back as "
                            "they were")
+
+
+def test_every_option_of_every_command_has_help():
+    import argparse
+
+    from hubsgo_ppl.cli import build_parser
+
+    commands = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    assert {"train", "revise", "evaluate", "subgoals", "diagnose", "sweep", "report", "review", "render",
+            "tasks"} <= set(commands.choices)
+    for name, sub in commands.choices.items():
+        for action in sub._actions:
+            assert action.help and action.help != argparse.SUPPRESS, (name, action.option_strings or action.dest)
+    text = commands.choices["diagnose"].format_help()
+    for option in ("--chains", "--draws", "--burn-in"):
+        assert next(line for line in text.splitlines() if line.strip().startswith(option)).split(maxsplit=2)[2:]
+
+
+def test_the_cli_package_loads_nothing_heavy_and_no_module_is_long():
+    """Importing the entry point loads only the standard library (the commands import what they use when they
+    run), so Ctrl-C during start-up reaches main's handler; and each module of the package stays short."""
+    import hubsgo_ppl.cli as cli
+
+    code = "import sys, hubsgo_ppl.cli; print(sorted(m for m in ('numpy', 'torch', 'pydantic') if m in sys.modules))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                         cwd=Path(cli.__file__).parents[2])
+    assert out.returncode == 0 and out.stdout.strip() == "[]", out.stdout + out.stderr
+    for module in Path(cli.__file__).parent.glob("*.py"):
+        assert len(module.read_text().splitlines()) <= 450, module.name
+
+
+_INTERRUPT = """
+import sys
+import hubsgo_ppl.cli.{module} as where
+def interrupted(*args, **kwargs):
+    raise KeyboardInterrupt
+where.{name} = interrupted
+from hubsgo_ppl.cli import main
+sys.exit(main({argv!r}))
+"""
+
+
+@pytest.mark.parametrize("module, name, argv", [
+    ("entry", "build_parser", ["train", "keydoor", "--steps", "1", "--out", "runs/y"]),     # start-up
+    ("readouts", "cmd_review", ["review", "runs/x"]),
+    ("readouts", "format_ranking", ["subgoals", "runs/x"]),    # the final G* table
+])
+def test_ctrl_c_anywhere_is_one_line_and_exit_2(module, name, argv, tmp_path):
+    (tmp_path / "runs" / "x").mkdir(parents=True)
+    (tmp_path / "runs" / "x" / "subgoals.json").write_text(json.dumps(
+        {"num_samples": 10, "marginals": {"a": 0.5}, "ranking": [{"subgoals": ["a"], "prob": 0.5}]}))
+    root = str(Path(__file__).resolve().parents[1])        # this checkout's package, from any folder
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p)}
+    res = subprocess.run([sys.executable, "-c", _INTERRUPT.format(module=module, name=name, argv=argv)],
+                         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
+    assert res.returncode == 2, res.stderr
+    assert res.stderr.strip() == f"hubsgo: interrupted (Ctrl-C) during `hubsgo {argv[0]}`", res.stderr
+
+
+def test_a_file_that_is_not_a_spec_given_as_model_is_not_printed_back(tmp_path, capsys):
+    secret = tmp_path / "passwd"
+    secret.write_text("rootpw: x:0:0:rootpw:/rootpw:/bin/bash\nhunter2: x:1:1::/usr/sbin:/usr/sbin/nologin\n")
+    out = tmp_path / "run"
+    for argv in (["train", "keydoor", "--model", str(secret), "--out", str(out), "--no-progress"],
+                 ["tasks", "keydoor", "--model", str(secret)]):
+        assert main(argv) == 2
+        line = _one_error_line(capsys)
+        assert line.startswith(f"hubsgo: error: {secret}: not a critic spec: a critic spec is a YAML mapping with the "
+                               "keys name, task, subgoals"), line
+        assert "rootpw" not in line and "hunter2" not in line and "/bin/bash" not in line
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("budget", [["--steps", "0"], ["--set", "steps=0"], ["--set", "steps=-5"]])
+def test_a_budget_of_no_steps_is_refused_the_same_way_by_flag_and_by_set(budget, tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["train", "fourroom", "--agent", "hdqn", "--out", str(out), "--no-progress", *budget]) == 2
+    line = _one_error_line(capsys)
+    assert "steps" in line and budget[-1].split("=")[-1] in line, line
+    assert not out.exists()

@@ -159,3 +159,69 @@ def test_yaml_errors_name_the_line_and_a_key_given_twice_is_refused(tmp_path, te
     with pytest.raises(SpecError) as err:
         load_model_spec(path)
     assert str(err.value).startswith(f"{path}: {fix}"), str(err.value)
+
+
+@pytest.mark.parametrize("text, says", [
+    ("password: hunter2\nuser: rootpw\n", "not a critic spec: a critic spec is a YAML mapping with the keys name, "
+                                          "task, subgoals, graph, edges, prior, likelihood, inference, and this "
+                                          "file has none of them (models/keydoor-specific.yaml is an example)"),
+    ("rootpw:x:0:0:rootpw:/rootpw:/bin/bash\nhunter2:x:1:1::/usr/sbin:/usr/sbin/nologin\n",
+     "not a critic spec: a critic spec is a YAML mapping of keys, and this file holds text"),
+    ("- hunter2\n- rootpw\n", "not a critic spec: a critic spec is a YAML mapping of keys, and this file holds a list"),
+    ("hunter2: rootpw\nhunter2: again\n", "not valid YAML (line 2, column 1: duplicate key 'hunter2'"),
+])
+def test_a_file_that_is_not_a_spec_is_refused_in_one_line_without_its_content(tmp_path, text, says):
+    path = tmp_path / "secrets.yaml"
+    path.write_text(text)
+    with pytest.raises(SpecError) as err:
+        load_model_spec(path)
+    msg = str(err.value)
+    assert msg.startswith(f"{path}: {says}") and "\n" not in msg, msg
+    if "duplicate" not in says:                     # a YAML error names the key it stops at, nothing else
+        assert not {"hunter2", "rootpw", "password", "bin"} & set(msg.replace(":", " ").replace(",", " ").split())
+
+
+def test_the_unknown_keys_of_a_spec_are_named_shortened_in_one_line(tmp_path):
+    long_keys = [f"key_{i}_" + "x" * 80 for i in range(9)]
+    path = tmp_path / "spec.yaml"
+    path.write_text(yaml.safe_dump({"name": "t", "subgoals": ["a", "b"], **{k: 1 for k in long_keys}}))
+    with pytest.raises(SpecError) as err:
+        load_model_spec(path)
+    msg = str(err.value)
+    assert "\n" not in msg and msg.startswith(f"{path}: unknown keys key_0_xxx") and msg.count("key_") == 5
+    assert msg.endswith("... and 4 more; remove them or check their spelling") and "x" * 40 not in msg, msg
+
+
+def test_one_formatter_for_files_sub_keys_and_settings():
+    """specs, the critic's settings and a maze's sub-goal arguments word pydantic's errors with one function."""
+    import pydantic
+
+    from hubsgo_ppl import specs, validation
+    from hubsgo_ppl.infer.config import InferenceConfig, InferenceSpec
+
+    assert specs.format_validation_error is validation.format_validation_error
+
+    class Args(specs.StrictModel):
+        cell: tuple[int, int]
+        size: int = pydantic.Field(3, gt=0)
+
+    with pytest.raises(pydantic.ValidationError) as err:
+        Args.model_validate({"cell": [1, "y"], "colour": "red", "size": 0})
+    fmt = specs.format_validation_error
+    assert fmt("maze.yaml", err.value).splitlines() == [      # the signature every caller used keeps working
+        "maze.yaml: cell[1]: Input should be a valid integer, unable to parse string as an integer",
+        "maze.yaml: size: Input should be greater than 0",
+        "maze.yaml: colour: unknown key; remove it or check its spelling"]
+    assert fmt("maze.yaml", err.value, prefix="subgoals[2] (door).args", sep="; ", limit=2) == (
+        "maze.yaml: subgoals[2] (door).args.cell[1]: Input should be a valid integer, unable to parse string as an "
+        "integer; maze.yaml: subgoals[2] (door).args.size: Input should be greater than 0; maze.yaml: and 1 more "
+        "problem")
+    assert fmt("Args", err.value, model=Args, sep="; ").split("; ")[1:3] == [
+        "Args.size = 0: input should be greater than 0 (default 3)", "Args.colour: unknown setting"]
+    with pytest.raises(pydantic.ValidationError) as err:
+        InferenceSpec(lr=-1.0, burn_in="x" * 500)
+    with pytest.raises(ValueError) as mine:
+        InferenceConfig(lr=-1.0, burn_in="x" * 500)
+    assert str(mine.value) == fmt("InferenceConfig", err.value, model=InferenceConfig, sep="; ")
+    assert str(mine.value).endswith(f"InferenceConfig.burn_in = '{'x' * 56}...: input should be a valid integer, "
+                                    "unable to parse string as an integer (default 32)")

@@ -22,35 +22,32 @@ the working directory, and the column's folder is the file's stem (``lab``).
 Run ``(task, variant, seed)`` writes ``SWEEP_DIR/<task>/<variant>/seed<seed>`` through
 :func:`hubsgo_ppl.experiments.run.train`, each in its own worker process (spawned, one torch thread).
 Re-running a sweep skips finished runs (checkpoint ``env_steps`` ≥ budget), resumes interrupted ones
-from their checkpoint, and retries a crashed run once before reporting it as failed.
+from their checkpoint, and retries a crashed run once before reporting it as failed. A run folder is
+resumed or started afresh by ``train`` itself, with its guards: only the files ``train`` writes
+(``RUN_FILES``) are removed, a folder whose logs show a lost checkpoint is refused, and a refused run
+is reported in one line without a retry. A sweep's ``name`` is a plain folder name, so that its
+default folder ``runs/sweeps/NAME`` stays under ``runs/sweeps``.
 """
 
 from __future__ import annotations
 
-import multiprocessing as mp
-import os
 import re
-import shutil
-import signal
 import time
-import traceback
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, ClassVar, Literal
 
 from pydantic import Field, field_validator, model_validator
 
 from ..resources import sweeps_dir
 from ..specs import SpecError, StrictModel, load_yaml, validate_spec
+from ..validation import VALUE_CHARS, shorten
 from .io import CheckpointError, load_checkpoint, write_yaml
 from .run import CHECKPOINT, CHECKPOINT_STEPS, RunConfig, RunError
+from .sweep_workers import KILL_ENV, Job, local, ray_tasks, run_job
 
 __all__ = ["SweepSpec", "TaskEntry", "Variant", "Job", "load_sweep", "plan", "select", "run_sweep", "run_status",
-           "column_folder", "anchored", "KILL_ENV"]
-
-#: test-only: a worker whose run id ("task/variant/seedK") equals this variable SIGKILLs itself right
-#: after its first checkpoint in that process (a deliberately crashed worker for the resume tests)
-KILL_ENV = "HUBSGO_SWEEP_TEST_KILL_AFTER_CHECKPOINT"
+           "column_folder", "anchored", "run_job", "KILL_ENV"]
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 
@@ -135,13 +132,24 @@ class Variant(StrictModel):
 
 
 class SweepSpec(StrictModel):
-    name: str
+    spec_kind: ClassVar[str] = "sweep file"
+    spec_example: ClassVar[str] = "sweeps/quick.yaml"
+
+    name: str = Field(description="the sweep's folder name under runs/sweeps (letters, digits, '-', '_', '.')")
     table: Literal["table1", "table2"] | None = None
     seeds: list[int] = Field(min_length=1)
     checkpoint_steps: int = Field(default=CHECKPOINT_STEPS, gt=0)
     overrides: list[str] = Field(default_factory=list)
     tasks: list[TaskEntry] = Field(min_length=1)
     variants: list[Variant] = Field(min_length=1)
+
+    @field_validator("name")
+    @classmethod
+    def _folder_name_ok(cls, v: str) -> str:
+        if not _NAME.match(v):
+            raise ValueError(f"{shorten(repr(v), VALUE_CHARS)} is not a plain folder name (no '..', '/' or absolute path: the sweep is "
+                             "written to runs/sweeps/NAME); use letters, digits, '-', '_' or '.'")
+        return v
 
     @field_validator("seeds")
     @classmethod
@@ -170,14 +178,6 @@ class SweepSpec(StrictModel):
         return self
 
 
-@dataclass
-class Job:
-    run_id: str                  # "task/variant/seedK"
-    out: str
-    budget: int
-    config: dict[str, Any]       # RunConfig fields
-
-
 def load_sweep(sweep: str | Path) -> tuple[SweepSpec, Path]:
     """Load a sweep file (a path, or the name of a shipped one like ``quick``) and check its tasks exist."""
     path = Path(sweep)
@@ -188,7 +188,7 @@ def load_sweep(sweep: str | Path) -> tuple[SweepSpec, Path]:
     if not path.is_file():
         shipped = sorted(p.stem for p in sweeps_dir().glob("*.yaml"))
         raise SpecError(f"{sweep}: no such sweep file; pass a path or one of: {', '.join(shipped)}")
-    spec = validate_spec(SweepSpec, load_yaml(path), source=str(path))
+    spec = validate_spec(SweepSpec, load_yaml(path, what=SweepSpec.spec_kind), source=str(path))
     from ..envs import get_task
 
     base = path.parent
@@ -261,104 +261,6 @@ def run_status(job: Job) -> str:
     return "finished" if steps >= job.budget else "partial"
 
 
-# -- the worker (runs in a child process, or a Ray task) ----------------------------------------------------
-
-
-def run_job(job: Job) -> dict[str, Any]:
-    """Train (or resume) one run; never raises: returns ``{"ok": bool, "error": str | None, ...}``."""
-    import torch
-
-    from .run import train
-
-    torch.set_num_threads(1)
-    out = Path(job.out)
-    resume = (out / CHECKPOINT).is_file()
-    if not resume and out.exists():
-        shutil.rmtree(out)          # an attempt that died before its first checkpoint: nothing to keep
-    hook = None
-    if os.environ.get(KILL_ENV) == job.run_id:
-        ckpt = out / CHECKPOINT
-        stamp = ckpt.stat().st_mtime_ns if ckpt.exists() else -1
-
-        def hook(stats: Any) -> None:
-            if ckpt.exists() and ckpt.stat().st_mtime_ns != stamp:
-                os.kill(os.getpid(), signal.SIGKILL)
-    try:
-        summary = train(RunConfig(**job.config), out, resume=resume, progress=False, on_episode=hook)
-    except BaseException as exc:  # noqa: BLE001 - reported to the parent, which decides about retries
-        return {"ok": False, "error": f"{type(exc).__name__}: {exc}".strip(), "trace": traceback.format_exc()}
-    ok = bool(summary["finished"])
-    return {"ok": ok, "error": None if ok else "stopped before its budget", "resumed": resume,
-            "env_steps": summary["env_steps"]}
-
-
-def _child(job: Job, conn: Any) -> None:
-    conn.send(run_job(job))
-    conn.close()
-
-
-# -- backends -----------------------------------------------------------------------------------------------
-
-
-def _local(jobs: list[Job], workers: int, done: Any) -> None:
-    """Run jobs in up to ``workers`` spawned processes; ``done(job, result)`` gets each outcome."""
-    from multiprocessing.connection import wait
-
-    ctx = mp.get_context("spawn")
-    queue = list(jobs)
-    live: dict[Any, tuple[Job, Any, Any]] = {}
-    while queue or live:
-        while queue and len(live) < workers:
-            job = queue.pop(0)
-            recv, send = ctx.Pipe(duplex=False)
-            proc = ctx.Process(target=_child, args=(job, send), name=f"sweep:{job.run_id}", daemon=False)
-            proc.start()
-            send.close()
-            live[proc.sentinel] = (job, proc, recv)
-        for sentinel in wait(list(live)):
-            job, proc, recv = live.pop(sentinel)
-            result = None
-            try:
-                if recv.poll():
-                    result = recv.recv()
-            except (EOFError, OSError):
-                result = None
-            proc.join()
-            recv.close()
-            if result is None:
-                sig = -proc.exitcode if proc.exitcode and proc.exitcode < 0 else None
-                why = f"killed by signal {signal.Signals(sig).name}" if sig else f"exit code {proc.exitcode}"
-                result = {"ok": False, "error": f"worker died ({why})"}
-            done(job, result)
-
-
-def _ray(jobs: list[Job], workers: int, done: Any) -> None:
-    try:
-        import ray
-    except ImportError:
-        raise RunError('the ray backend needs Ray: pip install "hubsgo-ppl[ray]", or use --backend local') \
-            from None
-    started = not ray.is_initialized()
-    if started:
-        ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False,
-                 runtime_env={"env_vars": {"OMP_NUM_THREADS": "1"}})
-    try:
-        # our own retry policy decides about crashed runs, so Ray must not retry on its own
-        remote = ray.remote(num_cpus=1, max_retries=0)(run_job)
-        pending = {remote.remote(job): job for job in jobs}
-        while pending:
-            ready, _ = ray.wait(list(pending), num_returns=1)
-            job = pending.pop(ready[0])
-            try:
-                result = ray.get(ready[0])
-            except Exception as exc:  # a worker that died (e.g. SIGKILL) surfaces here
-                result = {"ok": False, "error": f"worker died ({type(exc).__name__})"}
-            done(job, result)
-    finally:
-        if started:
-            ray.shutdown()
-
-
 def select(spec: SweepSpec, path: Path, variants: list[str] | None = None,
            tasks: list[str] | None = None) -> SweepSpec:
     """The part of the grid with only these variants (rows) and tasks (columns); None keeps them all.
@@ -384,7 +286,8 @@ def run_sweep(sweep: str | Path, backend: str = "local", workers: int = 2, out: 
 
     ``finished`` counts runs completed by this call, ``skipped`` runs that were already complete,
     ``retried`` runs that crashed once and were run again, ``failed`` the ``"run_id: error"`` of runs
-    that crashed twice. ``runs`` maps every run id to its final status.
+    that crashed twice, or ``"run_id: refused: why"`` of runs whose folder ``train`` refused (not
+    retried). ``runs`` maps every run id to its final status.
     """
     if backend not in ("local", "ray"):
         raise RunError(f"unknown backend {backend!r}; use 'local' or 'ray'")
@@ -408,13 +311,18 @@ def run_sweep(sweep: str | Path, backend: str = "local", workers: int = 2, out: 
 
         bar = tqdm(total=len(jobs), initial=result["skipped"], unit="run", desc=f"sweep {spec.name}",
                    dynamic_ncols=True)
-    execute = _local if backend == "local" else _ray
+    execute = local if backend == "local" else ray_tasks
     t0 = time.perf_counter()
 
     def first(job: Job, res: dict[str, Any]) -> None:
         if res["ok"]:
             result["finished"] += 1
             result["runs"][job.run_id] = "finished"
+            if bar is not None:
+                bar.update(1)
+        elif res.get("refused"):
+            result["failed"].append(f"{job.run_id}: refused: {res['error']}")
+            result["runs"][job.run_id] = "refused"
             if bar is not None:
                 bar.update(1)
         else:

@@ -18,6 +18,8 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from ..validation import format_validation_error
+
 __all__ = ["InferenceSpec", "InferenceConfig", "MAX_EXACT_N"]
 
 MAX_EXACT_N = 20  # distributions.mrf.EXACT_LIMIT: the largest N whose 2^N states are enumerated
@@ -72,14 +74,5 @@ class InferenceConfig(InferenceSpec):
 
 
 def _one_line(cls: type[InferenceSpec], err: ValidationError) -> str:
-    """pydantic's error list as one line: ``Class.field = value: problem (default ...)`` per problem."""
-    fields = cls.model_fields
-    parts = []
-    for e in err.errors():
-        key = ".".join(str(p) for p in e["loc"]) or "<settings>"
-        if e["type"] == "extra_forbidden" or key not in fields:
-            parts.append(f"{cls.__name__}.{key}: unknown setting; use one of: {', '.join(fields)}")
-        else:
-            msg = e["msg"][:1].lower() + e["msg"][1:]
-            parts.append(f"{cls.__name__}.{key} = {e['input']!r}: {msg} (default {fields[key].default!r})")
-    return "; ".join(parts)
+    """``Class.field = value: problem (default ...)`` per problem, on one line."""
+    return format_validation_error(cls.__name__, err, model=cls, sep="; ")

@@ -200,3 +200,52 @@ def test_a_subset_of_the_grid_runs_only_its_rows_and_columns_and_the_rest_follow
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "no variants named 'ppo'; its variants: hdqn, hubsgo" in err[0], err
     assert not (tmp_path / "none").exists()
+
+
+@pytest.mark.parametrize("name", ["../../x", "/tmp/x", "a/b", "..", ".hidden", "a\\b"])
+def test_a_sweep_name_must_be_a_plain_folder_name(tmp_path, name):
+    path = _write(tmp_path, name=name)
+    with pytest.raises(SpecError, match=r"name: .*is not a plain folder name") as err:
+        load_sweep(path)
+    assert str(path) in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_run_folder_without_a_checkpoint_keeps_the_files_the_tool_did_not_write(tmp_path):
+    from hubsgo_ppl.experiments.sweep_workers import run_job
+
+    path = _write(tmp_path)
+    job = plan(load_sweep(path)[0], tmp_path / "sweep")[0]
+    run = Path(job.out)
+    run.mkdir(parents=True)
+    (run / "notes.txt").write_text("my notes")
+    (run / "metrics.csv").write_text("episode,env_steps\n0,3\n")      # a partial log, before any checkpoint
+    (run / "tb").mkdir()
+    (run / "tb" / "mine.txt").write_text("kept")
+    result = run_job(job)
+    assert result["ok"], result
+    assert (run / "notes.txt").read_text() == "my notes" and (run / "tb" / "mine.txt").read_text() == "kept"
+    assert (run / "checkpoint.pt").is_file() and _rows(run)[0]["episode"] == "0"
+
+
+def test_a_sweep_refuses_a_run_folder_whose_logs_outlived_its_checkpoint_as_train_does(tmp_path, capsys):
+    """The guard of `train`: a folder without checkpoint.pt whose metrics.csv passes the second checkpoint
+    lost it; the sweep refuses it in one line, does not retry it, and leaves every file in place."""
+    from hubsgo_ppl.cli import main
+
+    path = _write(tmp_path, checkpoint_steps=100)
+    out = tmp_path / "sweep"
+    run = out / "fourroom" / "hdqn" / "seed0"
+    run.mkdir(parents=True)
+    logs = "episode,env_steps,return\n" + "".join(f"{i},{100 * (i + 1)},0.0\n" for i in range(3))
+    (run / "metrics.csv").write_text(logs)
+    (run / "config.yaml").write_text("checkpoint_steps: 100\n")
+    with pytest.raises(RunError, match="checkpoint.pt is missing"):      # what `train` says of this folder
+        train(RunConfig(task="fourroom", agent="hdqn", steps=1, overrides=FAST, checkpoint_steps=100), run,
+              progress=False)
+    assert main(["sweep", str(path), "--out", str(out), "--workers", "1", "--no-progress"]) == 2
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert "0 finished, 0 skipped (already done), 0 retried, 1 failed" in lines[0], lines
+    assert len(lines) == 2 and lines[1].startswith("  failed: fourroom/hdqn/seed0: refused: ") and \
+        "checkpoint.pt is missing, though metrics.csv reaches env step 300" in lines[1], lines
+    assert (run / "metrics.csv").read_text() == logs and sorted(p.name for p in run.iterdir()) == \
+        ["config.yaml", "metrics.csv"]

@@ -1,0 +1,63 @@
+"""How the commands print what a run holds: G* as a ranking, a transfer, a run's summary."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+__all__ = ["format_ranking", "format_transfer", "print_summary", "names"]
+
+
+def format_ranking(table: dict[str, Any]) -> str:
+    lines = [f"G* from {table['num_samples']:,} critic samples (most probable sub-goal sets):",
+             f"{'rank':>4}  {'P(sample)':>9}  {'P(exact)':>8}  sub-goals"]
+    for i, r in enumerate(table["ranking"], 1):
+        exact = "" if r.get("exact_prob") is None else f"{r['exact_prob']:.4f}"
+        tie = "  ≈ tie with the one above" if r.get("near_tie") and i > 1 else ""
+        lines.append(f"{i:>4}  {r['prob']:>9.4f}  {exact:>8}  {{{', '.join(r['subgoals'])}}}{tie}")
+    lines.append("marginals P(w=1): " + ", ".join(f"{n}={p:.2f}" for n, p in table["marginals"].items()))
+    if table["ranking"] and not table["ranking"][0]["subgoals"]:
+        lines.append("the most probable set is empty: no sub-goal's evidence outweighs the prior's pull towards "
+                     "small sets; positive edges in the spec let in what the successes achieve: `hubsgo review RUN` "
+                     "suggests them in RUN/review/suggested_spec.yaml, and `hubsgo revise RUN --model "
+                     "RUN/review/suggested_spec.yaml --no-train` reads G* again under them")
+    return "\n".join(lines)
+
+
+def format_transfer(init: dict[str, Any]) -> str:
+    parts = []
+    for part, words in (("critic", "critic"), ("high", "high level"), ("low", "low level")):
+        m = init["mapped"].get(part)
+        if m is None:
+            continue
+        if part == "critic":
+            parts.append(f"critic ({m['subgoals']} sub-goals, {m['edges']} edges by name)")
+        else:
+            parts.append(f"{words} ({next(iter(m.values()))} {next(iter(m))} by name)")
+    text = (f"initialised from {init['run']} ({init['agent']} on {init['task']}, {init['env_steps']:,} env steps): "
+            + ", ".join(parts))
+    if init.get("schedules"):
+        text += "; schedules continued: " + ", ".join(f"loop.{k}={v:g}" for k, v in init["schedules"].items())
+    if init.get("defaults"):
+        text += "; transfer defaults: " + ", ".join(f"loop.{k}={v}" for k, v in init["defaults"].items())
+    return text
+
+
+def print_summary(summary: dict[str, Any], out: Path) -> None:
+    if summary.get("init_from"):
+        print(format_transfer(summary["init_from"]))
+    state = "" if summary["finished"] else "  (paused before its budget; continue with --resume)"
+    print(f"run: {summary['run_dir']}  episodes={summary['episodes']}  env_steps={summary['env_steps']}  "
+          f"wall={summary['wall_time']:.0f}s{state}")
+    if summary.get("settled"):
+        st = summary["settled"]
+        print(f"settled at env step {st['step']:,}: {st['rate']:.0%} of the last {st['window']} training episodes "
+              "succeeded; G* is read from the critic refitted on the recent successes at its settled power")
+    table_path = out / "subgoals.json"
+    if table_path.exists() and summary["finished"]:
+        print(format_ranking(json.loads(table_path.read_text())))
+
+
+def names(items: list[str]) -> str:
+    return ", ".join(items) or "none"

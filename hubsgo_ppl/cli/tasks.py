@@ -1,0 +1,65 @@
+"""``hubsgo tasks``: list the tasks, or check a task (and a critic spec) as ``hubsgo train`` would."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+__all__ = ["cmd_tasks"]
+
+
+def cmd_tasks(args: argparse.Namespace) -> int:
+    from ..envs import get_task, tasks
+
+    if args.model is not None and not args.task:
+        from ..experiments.run import RunError
+
+        raise RunError("--model checks a spec against the tasks named: `hubsgo tasks TASK --model SPEC`")
+    chosen = {str(t): get_task(t) for t in args.task} if args.task else tasks()
+    for name, info in chosen.items():
+        cat = info.catalogue
+        print(f"{name}  ({info.family}, gymnasium id {info.env_id})")
+        if cat.description:
+            print(f"    {cat.description.strip()}")
+        for sg in cat.subgoals:
+            desc = f": {sg.description}" if sg.description else ""
+            print(f"    - {sg.name} [{sg.kind}]{desc}")
+        if args.task:
+            _check_task(name, info, args.model)
+    return 0
+
+
+def _check_task(name: str, info: Any, model: str | None) -> None:
+    """What `hubsgo train` checks before a run, without training: a maze's reachability and optimum,
+    and the critic spec the run would use."""
+    from ..experiments.run import RunConfig, resolve
+
+    if info.family == "minigrid":
+        from ..envs.minigrid.bfs import check_reachable, optimal_steps_range
+
+        never = check_reachable(name)       # a goal no sequence reaches: SpecError
+        if never is None:
+            print("    reachability: too many states to check exactly; a coarser check over cells found nothing wrong")
+        elif never:
+            print(f"    reachability: WARNING: no reachable state achieves {', '.join(never)}")
+        else:
+            low, high = optimal_steps_range(name)
+            shortest = (f"{low} steps" if low == high else
+                        f"{low}-{high} steps, by the start direction (drawn at random each episode)")
+            print(f"    reachability: the goal and every sub-goal can be reached; shortest solution {shortest}")
+    from ..specs import list_model_specs
+
+    if model is None and f"{info.name}-specific" not in list_model_specs():
+        print("    critic spec: none built in for this task; check yours with --model SPEC")
+        return
+    from ..experiments.run import note_unlinked_goals, warn_goals_left_out
+
+    resolved = resolve(RunConfig(task=name, agent="hubsgo", model=model))
+    spec = resolved["model_spec"]
+    left = resolved.get("subgoals")
+    n_edges = len(spec["edges"])
+    print(f"    critic spec {resolved['model']!r}: {len(spec['subgoals'])} sub-goals"
+          + (f" (a subset: {', '.join(left)})" if left else "") + f", {n_edges} edge{'s' * (n_edges != 1)}, prior "
+          f"{spec['prior']['name']}, likelihood {spec['likelihood']['name']}: valid for this task")
+    warn_goals_left_out(resolved["model"], resolved["task_ref"], left)      # as `hubsgo train` says them
+    note_unlinked_goals(resolved)
