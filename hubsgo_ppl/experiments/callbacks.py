@@ -165,8 +165,10 @@ class CheckpointCallback(Callback):
 class CriticHistoryCallback(Callback):
     """``critic_history.csv``: the training critic's P(w_i = 1) every ``history_every`` episodes (rows
     ``critic=training``), and, once the run ends with G* read, the marginals of the critic G* is read
-    from (``critic=settled`` where the agent settled and G* comes from the refit, else ``training``),
-    in a last row numbered one past the last episode."""
+    from, in a last row numbered one past the last episode: ``critic=settled`` where the agent settled
+    and G* comes from the critic refitted on the recent successes (``HRLLoop.g_star_critic``), else
+    ``critic=final`` (the training critic at the end). ``subgoals``, ``review`` and ``diagnose`` print
+    the marginals of that last row."""
 
     def on_training_start(self, run: TrainingRun) -> None:
         self.active = run.has_critic
@@ -184,15 +186,15 @@ class CriticHistoryCallback(Callback):
     def on_training_end(self, run: TrainingRun) -> None:
         if self.active and run.g_star is not None:
             settled = run.agent.settled_step is not None
-            self._write(run.agent.episodes, run.agent.env_steps, "settled" if settled else "training",
+            self._write(run.agent.episodes, run.agent.env_steps, "settled" if settled else "final",
                         [run.g_star["marginals"][n] for n in self.names])
 
 
 class ProgressBarCallback(Callback):
     """A tqdm bar over the env-step budget. Its fields, over the last 20 episodes: ``return`` (mean
     episode return), ``success`` (success rate); of the last episode: ``p_filter`` (the filter
-    probability, the probability that the high level chooses its sub-goal from Ĝt, the critic's sampled
-    set), ``critic_loss`` (the critic's loss in its last updates; HUBS-GO only)."""
+    probability: the probability that the high level chooses its next sub-goal from Ĝt, the critic's
+    sampled set, instead of from every open sub-goal; it rises over training), ``critic_loss`` (the critic's loss in its last updates; HUBS-GO only)."""
 
     def __init__(self, window: int = 20):
         self.window = window

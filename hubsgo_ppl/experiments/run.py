@@ -6,7 +6,7 @@ Run directory::
     metrics.csv            one row per training episode
     critic_history.csv     P(w_i = 1) over training (HUBS-GO): rows ``critic=training`` every few episodes,
                            and a last row with the marginals of the critic G* is read from
-                           (``critic=settled`` where that is the settled refit)
+                           (``critic=settled`` where that is the settled refit, else ``final``)
     tb/                    TensorBoard events
     checkpoint.pt          latest checkpoint, written atomically at the end of the episode that crosses
                            each multiple of ``checkpoint_steps`` env steps (and at the end of the run)
