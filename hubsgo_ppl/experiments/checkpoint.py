@@ -209,9 +209,13 @@ def check_resume(out: str | Path, task: str, *, agent: str | None = None, seed: 
     equal to the run's own pass, so the command that started a run can be repeated with ``--resume``; a
     flag left out (None) is not compared."""
     out = Path(out)
-    if not (out / CHECKPOINT).exists() and not (out / "config.yaml").exists():
-        return
-    run = ResolvedRun.from_dict(run_config(out), str(out / "config.yaml"))
+    if (out / CHECKPOINT).exists():
+        run = ResolvedRun.from_dict(run_config(out), str(out / "config.yaml"))
+    else:
+        run = recorded_run(out)
+        if run is None:
+            return              # nothing recorded to compare with: train says what it can do
+
     clash = []
     if task not in (run.task, run.task_ref) and task_ref(task) != run.task_ref:
         clash.append(f"task {task} (the run's is {run.task_ref})")
