@@ -22,8 +22,8 @@ import torch
 
 from ..envs import get_task
 from .callbacks import Callback, CallbackList, TrainingRun, default_callbacks
-from .checkpoint import (CHECKPOINT, EPISODE_LOGS, RUN_FILES, build_run, read_checkpoint, recorded_run, restore,
-                         save_checkpoint)
+from .checkpoint import CHECKPOINT, EPISODE_LOGS, RUN_FILES, read_checkpoint, recorded_run
+from .restore import build_run, restore
 from .io import RunFileError, is_temp_file, truncate_csv, write_yaml
 from .lock import LOCK_FILE, run_folder_lock
 from .logger import CSVOutput, Logger, TensorBoardOutput, read_csv_rows

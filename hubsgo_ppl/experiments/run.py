@@ -18,7 +18,8 @@ Run directory::
     .lock                  held by the process writing the run (``experiments/lock.py``)
 
 The harness is split by concept: ``resolved.py`` (:class:`RunConfig`, the typed :class:`ResolvedRun`),
-``resolve.py`` (resolving a run), ``checkpoint.py`` (building, saving, loading, resume checks),
+``resolve.py`` (resolving a run), ``checkpoint.py`` (the checkpoint and config.yaml), ``restore.py``
+(building and restoring a run, checking a resume's flags),
 ``lock.py`` (the run folder lock), ``callbacks.py`` (:class:`Callback` and the harness's callbacks) and
 ``driver.py`` (:func:`train`). Their public names are importable from here too.
 
@@ -40,9 +41,9 @@ import numpy as np
 from ..agents.loop import HRLLoop
 from ..agents.seeding import EVAL_SEED_OFFSET, episode_seed
 from .callbacks import Callback, CallbackList, TrainingRun
-from .checkpoint import (CHECKPOINT, CHECKPOINT_FORMAT, EPISODE_LOGS, G_STAR_SAMPLES, RUN_FILES, build_run,
-                         check_resume, load_run, read_checkpoint, read_config_file, restore, run_config,
-                         run_dir_checkpoint, save_checkpoint, subgoal_table)
+from .checkpoint import (CHECKPOINT, CHECKPOINT_FORMAT, EPISODE_LOGS, G_STAR_SAMPLES, RUN_FILES, read_checkpoint,
+                         read_config_file, run_config, run_dir_checkpoint, save_checkpoint, subgoal_table)
+from .restore import build_run, check_resume, load_run, restore
 from .driver import train
 from .io import write_json
 from .plots import REVISIONS_CSV, plot_run_curve, read_revisions
@@ -52,7 +53,7 @@ from .resolved import CHECKPOINT_STEPS, ResolvedRun, RunConfig, RunError
 
 __all__ = ["RunConfig", "ResolvedRun", "RunError", "Callback", "CallbackList", "TrainingRun", "train", "evaluate",
            "load_run", "run_config", "check_resume", "resolve", "resolve_run", "subgoal_table", "plot_run_curve",
-           "read_revisions", "read_config_file", "run_dir_checkpoint", "task_ref", "task_goals",
+           "read_revisions", "read_config_file", "read_checkpoint", "restore", "run_dir_checkpoint", "task_ref", "task_goals",
            "catalogue_digest", "check_catalogue", "note_unlinked_goals", "warn_goals_left_out", "CHECKPOINT",
            "CHECKPOINT_FORMAT", "CHECKPOINT_STEPS", "G_STAR_SAMPLES", "REVISIONS_CSV", "RUN_FILES", "EPISODE_LOGS"]
 
