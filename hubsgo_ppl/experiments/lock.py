@@ -4,7 +4,8 @@
 the folder until it returns; a second process that tries is refused in one line instead of
 interleaving its rows, config and checkpoint with the first's. The kernel drops the lock when the
 process ends, however it ends (``kill -9`` included), so a killed run never leaves a stale lock.
-The lock file is empty and stays in the folder (removing it would race with a process opening it).
+The lock file is empty and is removed on release (a process that opened it meanwhile sees that the
+file it locked is no longer the one at the path, and tries again).
 """
 
 from __future__ import annotations
@@ -36,8 +37,8 @@ def _open_lock(path: Path) -> int:
 @contextlib.contextmanager
 def run_folder_lock(out: str | Path) -> Iterator[bool]:
     """Hold the lock of run folder ``out`` (created if missing) for the block; yields whether the folder
-    was created. A folder created here that holds nothing but the lock when the block ends is removed,
-    so a run that could not start leaves no folder of its own."""
+    was created. A folder created here that is empty when the block ends is removed, so a run that
+    could not start leaves no folder of its own."""
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise RunError(f"--out {out}: a file, not a folder; choose a folder for the run")
@@ -69,9 +70,9 @@ def run_folder_lock(out: str | Path) -> Iterator[bool]:
     try:
         yield created
     finally:
-        try:
-            if created and [p.name for p in out.iterdir()] == [LOCK_FILE]:
-                path.unlink()
+        try:            # removed while still locked; a process that opened it meanwhile sees it went, above
+            path.unlink()
+            if created and not any(out.iterdir()):
                 out.rmdir()
         except OSError:
             pass

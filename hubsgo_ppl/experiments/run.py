@@ -15,7 +15,7 @@ Run directory::
     eval.json              written by ``evaluate``
     revisions.csv          one line per revision of the critic spec (``hubsgo revise``), if any
     revisions/NNN/         spec_before.yaml, spec_after.yaml and revision.json of revision NNN
-    .lock                  held by the process writing the run (``experiments/lock.py``)
+    .lock                  there while a process writes the run, which holds its lock (``experiments/lock.py``)
 
 The harness is split by concept: ``resolved.py`` (:class:`RunConfig`, the typed :class:`ResolvedRun`),
 ``resolve.py`` (resolving a run), ``checkpoint.py`` (the checkpoint and config.yaml), ``restore.py``

@@ -53,6 +53,14 @@ def test_a_second_train_or_resume_on_a_locked_folder_is_refused(held, capsys):
     assert sorted(p.name for p in held.iterdir()) == [LOCK_FILE, "notes.txt"], "nothing written or removed"
 
 
+def test_the_lock_file_goes_with_the_lock(tmp_path):
+    out = tmp_path / "run"
+    out.mkdir()
+    with run_folder_lock(out) as created:
+        assert not created and (out / LOCK_FILE).is_file()
+    assert list(out.iterdir()) == []
+
+
 def test_the_lock_is_released_when_train_returns(tmp_path):
     from hubsgo_ppl.experiments import train
 
@@ -68,4 +76,4 @@ def test_a_folder_the_lock_created_goes_when_nothing_was_written(tmp_path):
     out = tmp_path / "new" / "run"
     with run_folder_lock(out) as created:
         assert created and (out / LOCK_FILE).is_file()
-    assert not out.exists()
+    assert not out.exists() and out.parent.is_dir()
