@@ -81,6 +81,10 @@ def resolve_run(cfg: RunConfig) -> ResolvedRun:
         raise RunError(f"--steps must be positive, got {cfg.steps}")
     if int(cfg.checkpoint_steps) <= 0:
         raise RunError(f"checkpoint_steps must be a positive number of env steps, got {cfg.checkpoint_steps}")
+    for name in ("history_every", "threads"):
+        value = getattr(cfg, name)
+        if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
+            raise RunError(f"{name} must be a positive whole number, got {value!r}")
     if isinstance(cfg.seed, bool) or not isinstance(cfg.seed, int) or cfg.seed < 0:
         raise RunError(f"a seed is a whole number, 0 or more; got {cfg.seed!r}")
     budget_set = [o for o in cfg.overrides if o.split("=", 1)[0].strip() == "steps"]
@@ -93,6 +97,9 @@ def resolve_run(cfg: RunConfig) -> ResolvedRun:
         if not (cfg.overrides or isinstance(exc, ConfigError)):
             raise
         raise RunError(str(exc)) from None
+    budget = hyper.get("steps")
+    if isinstance(budget, bool) or not isinstance(budget, int) or budget <= 0:    # --set steps=0 as --steps 0
+        raise RunError(f"--steps must be positive, got {budget!r} (from --set steps=...)")
     ref = task_ref(cfg.task)
     resolved: dict[str, Any] = {
         "task": info.name, "task_ref": ref, "family": info.family,

@@ -129,3 +129,12 @@ def test_a_symlinked_log_is_refused_never_appended_through(tmp_path, capsys):
     assert main(["train", "keydoor", "--out", str(run), "--resume", "--steps", "600", "--no-progress"]) == 2
     assert "a symbolic link" in _one_line(capsys)
     assert target.read_bytes() == before and (run / "metrics.csv").is_symlink()
+
+
+@pytest.mark.parametrize("flag", [["--steps", "0"], ["--set", "steps=0"]])
+def test_a_zero_budget_is_refused_the_same_way_by_either_flag(tmp_path, capsys, flag):
+    out = tmp_path / "run"
+    capsys.readouterr()
+    assert main(["train", "keydoor", "--out", str(out), "--no-progress", *flag]) == 2
+    assert "--steps must be positive, got 0" in _one_line(capsys)
+    assert not out.exists()
