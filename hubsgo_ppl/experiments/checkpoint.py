@@ -7,7 +7,6 @@ state_dicts and the resolved run as plain data. Its config is checked field by f
 
 from __future__ import annotations
 
-import errno
 import numbers
 from pathlib import Path
 from typing import Any, Mapping
@@ -49,9 +48,8 @@ def save_checkpoint(out: Path, run: ResolvedRun | Mapping[str, Any], agent: Any,
     except (OSError, RuntimeError) as exc:
         if not _disk_error(exc):
             raise
-        reason = (exc.strerror or str(exc)) if isinstance(exc, OSError) else "the write failed"
-        if isinstance(exc, OSError) and exc.errno == errno.ENOSPC or "write failed" in str(exc):
-            reason = "no space left on the device" if not isinstance(exc, OSError) else reason
+        reason = ((exc.strerror or str(exc)) if isinstance(exc, OSError)
+                  else "the write failed, most likely for want of space on the disk")
         kept = ("the previous checkpoint is intact" if (out / CHECKPOINT).exists() else "there is no earlier one")
         raise RunError(f"{out / CHECKPOINT}: cannot write the checkpoint ({reason}); {kept}; free some space and "
                        f"continue with --resume") from None
