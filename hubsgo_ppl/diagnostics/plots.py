@@ -420,5 +420,5 @@ def plot_marginals_history(
                                                   markeredgecolor="k", markersize=11)]
         ax.legend(handles, labels[: len(names)] + [end_label], loc="center left", bbox_to_anchor=(1.0, 0.5),
                   fontsize=8, frameon=False)
-        ax.set_title("critic marginals over training, and of the critic G* is read from")
+        ax.set_title("critic marginals over training (lines) and of the critic G* is read from (stars)")
     return _save(fig, path)
