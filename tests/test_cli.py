@@ -343,14 +343,22 @@ def test_incomplete_checkpoint_is_refused_in_one_line(tmp_path, capsys):
 
 
 def test_resume_of_a_run_killed_before_its_first_checkpoint_starts_afresh(tmp_path, capsys):
+    from hubsgo_ppl.experiments.run import RunConfig, resolve
+
     run = tmp_path / "run"
     (run / "tb").mkdir(parents=True)
     (run / "tb" / "events.out.tfevents.1.host.1.0").write_bytes(b"partial")
     (run / "config.yaml").write_text("task: keydoor\n")
     (run / "metrics.csv").write_text("episode,return\r\n0,0.5\r\n1,0.0\r\n")
     (run / ".metrics.csv.1a2b3c4d.tmp").write_text("left by a kill")
-    assert main(["train", "keydoor", "--out", str(run), "--resume", "--steps", "300", "--seed", "2",
-                 "--no-progress", *TINY]) == 0
+    args = ["train", "keydoor", "--out", str(run), "--resume", "--steps", "300", "--seed", "2", "--no-progress", *TINY]
+    assert main(args) == 2          # a config.yaml that does not record a whole run: nothing to rebuild
+    assert "config.yaml is missing or damaged" in _one_error_line(capsys)
+    assert (run / "config.yaml").read_text() == "task: keydoor\n" and (run / "metrics.csv").is_file()
+    overrides = [v for k, v in zip(TINY[::2], TINY[1::2])]
+    (run / "config.yaml").write_text(yaml.safe_dump(resolve(RunConfig(task="keydoor", steps=300, seed=2,
+                                                                      overrides=overrides))))
+    assert main(args) == 0
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "afresh" in err[0] and str(run) in err[0], err
     rows = list(csv.DictReader((run / "metrics.csv").open(newline="")))

@@ -33,6 +33,17 @@ def _seed(text: str) -> int:
 RUN_HELP = "a run directory: the --out folder of `hubsgo train`"
 
 
+#: what the progress bar of `hubsgo train` shows (experiments/callbacks.py, ProgressBarCallback)
+TRAIN_EPILOG = """progress bar, after each episode:
+  return       mean episode return over the last 20 episodes
+  success      success rate over the last 20 episodes
+  p_filter     the filter probability: the probability that the high level chooses its next sub-goal
+               from Ĝt, the critic's sampled set, instead of from every open sub-goal; it rises
+               over training
+  critic_loss  the sub-goal critic's loss in its last updates (HUBS-GO only)
+"""
+
+
 def build_parser() -> argparse.ArgumentParser:
     from ..agents.factory import agent_names
     from ..experiments.run import CHECKPOINT_STEPS
@@ -40,7 +51,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="hubsgo", description="HUBS-GO: Bayesian sub-goal optimisation for HRL")
     sub = p.add_subparsers(dest="command", required=True)
 
-    t = sub.add_parser("train", help="train an agent on a task and write a run directory")
+    t = sub.add_parser("train", help="train an agent on a task and write a run directory",
+                       formatter_class=argparse.RawDescriptionHelpFormatter, epilog=TRAIN_EPILOG)
     t.add_argument("task", help="task name (see `hubsgo tasks`) or a catalogue .yaml")
     t.add_argument("--agent", choices=agent_names(), help="the agent to train (default hubsgo)")
     t.add_argument("--model", help="critic spec: a built-in name (e.g. keydoor-specific) or a .yaml path")

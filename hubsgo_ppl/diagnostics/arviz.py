@@ -53,7 +53,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ..experiments.io import atomic_path
+from ..experiments.io import atomic_path, atomic_write  # noqa: F401 - atomic_write: the package's one writer
 
 
 def _import_arviz():
@@ -266,20 +266,13 @@ def summary(idata: az.InferenceData, var_names: Sequence[str] = ("w",)) -> pd.Da
     return table
 
 
-def atomic_write(path: str | os.PathLike[str], write: Callable[[Path], None], suffix: str = "") -> Path:
-    """Write ``path`` through ``write(tmp_path)`` with :func:`hubsgo_ppl.experiments.io.atomic_path`: the
-    temporary file (ending in ``suffix``) replaces ``path`` only once ``write`` has returned, so readers
-    never see a partial file and a failed write leaves any previous file untouched."""
-    with atomic_path(path, suffix=suffix) as tmp:
-        write(tmp)
-    return Path(path)
-
-
 def save_netcdf(idata: az.InferenceData, path: str | os.PathLike[str]) -> Path:
     """Write ``idata`` to ``path`` as netCDF, atomically (temp file + ``os.replace``)."""
     if not isinstance(idata, az.InferenceData):
         raise ValueError(f"idata must be an arviz.InferenceData, got {type(idata).__name__}")
-    return atomic_write(path, lambda tmp: idata.to_netcdf(str(tmp)), suffix=".nc")
+    with atomic_path(path, suffix=".nc") as tmp:
+        idata.to_netcdf(str(tmp))
+    return Path(path)
 
 
 def load_netcdf(path: str | os.PathLike[str]) -> az.InferenceData:

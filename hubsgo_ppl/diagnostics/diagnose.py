@@ -3,7 +3,8 @@
 Draws several independent MH chains from the trained critic, converts them to ArviZ data, and writes
 into ``RUN_DIR/diagnostics/``: ``summary.csv`` (mean, sd, ess_bulk, ess_tail, r_hat per sub-goal),
 ``trace.png``, ``forest.png``, ``posterior.png``, ``mrf_graph.png`` (the learned MRF),
-``marginals.png`` (P(w_i = 1) over training, from ``critic_history.csv``) and ``posterior.nc``.
+``marginals.png`` (P(w_i = 1) over training, from ``critic_history.csv``, with the marginals of the
+critic G* is read from, the settled refit where the agent settled, as stars) and ``posterior.nc``.
 """
 
 from __future__ import annotations
@@ -55,6 +56,9 @@ def diagnose(run_dir: str | Path, chains: int = 4, draws: int = 2000, burn_in: i
                                         factors["pairwise"], out / "mrf_graph.png",
                                         title=f"learned critic: {resolved['task']} ({resolved.get('model', '')})")
     rows = read_csv_rows(run_dir / "critic_history.csv", required=("env_steps",))
+    # the last row (critic=settled or final) holds the marginals of the critic G* is read from
+    ends = [r for r in rows if r.get("critic") in ("settled", "final")]
+    rows = [r for r in rows if r.get("critic") in (None, "", "training")]
     if rows:
         def number(text: str | None) -> float:     # a sub-goal a revision added has no value before it
             return float(text) if text not in (None, "") else float("nan")
@@ -62,8 +66,13 @@ def diagnose(run_dir: str | Path, chains: int = 4, draws: int = 2000, burn_in: i
         try:
             steps = np.array([float(r["env_steps"]) for r in rows])
             marg = np.array([[number(r.get(n)) for n in names] for r in rows])
+            end = np.array([number(ends[-1].get(n)) for n in names]) if ends else None
+            end_step = float(ends[-1]["env_steps"]) if ends else None
         except ValueError as exc:
             raise RunFileError(f"{run_dir / 'critic_history.csv'}: damaged, a value is not a number ({exc})") from None
-        paths["marginals"] = plot_marginals_history(steps, marg, names, out / "marginals.png")
+        label = ("settled refit (G*)" if ends and ends[-1]["critic"] == "settled" else "end of training (G*)")
+        paths["marginals"] = plot_marginals_history(steps, marg, names, out / "marginals.png",
+                                                    end=end if end is not None and np.isfinite(end).all() else None,
+                                                    end_step=end_step, end_label=label)
     paths["netcdf"] = save_netcdf(idata, out / "posterior.nc")
     return {"summary": table, "paths": paths, "chains": chains, "draws": draws}

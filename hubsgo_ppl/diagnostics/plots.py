@@ -275,9 +275,28 @@ def marginals_history_figure(steps: Any, marginals: Any, names: Sequence[str]) -
 
 
 def plot_marginals_history(
-    steps: Any, marginals: Any, names: Sequence[str], path: str | os.PathLike[str]
+    steps: Any, marginals: Any, names: Sequence[str], path: str | os.PathLike[str],
+    end: Any = None, end_step: float | None = None, end_label: str = "settled refit (G*)",
 ) -> Path:
     """P(w_i = 1) of the critic (Eq. 1) over training and write it as a PNG: ``steps`` (T,)
     strictly increasing, ``marginals`` (T, N), one line per sub-goal, from periodic checkpoints or a
-    logged history."""
-    return _save(marginals_history_figure(steps, marginals, names), path)
+    logged history. ``end`` (N,): the marginals of the critic G* is read from at ``end_step`` (the
+    settled refit, whose marginals can differ from the training critic's), drawn as stars in each
+    sub-goal's colour with ``end_label`` in the legend."""
+    fig = marginals_history_figure(steps, marginals, names)
+    if end is not None:
+        e = _to_numpy(end, "end").astype(np.float64).reshape(-1)
+        if e.shape[0] != len(names) or not np.isfinite(e).all() or (e < 0).any() or (e > 1).any():
+            raise ValueError(f"end must be {len(names)} probabilities in [0, 1], one per sub-goal")
+        ax = fig.axes[0]
+        x = float(end_step) if end_step is not None else float(_to_numpy(steps, "steps")[-1])
+        for line, p in zip(ax.get_lines()[: len(names)], e):
+            ax.plot([x], [p], marker="*", markersize=11, linestyle="none", color=line.get_color(),
+                    markeredgecolor="k", markeredgewidth=0.5)
+        handles, labels = ax.get_legend_handles_labels()
+        handles = handles[: len(names)] + [Line2D([], [], marker="*", linestyle="none", color="0.4",
+                                                  markeredgecolor="k", markersize=11)]
+        ax.legend(handles, labels[: len(names)] + [end_label], loc="center left", bbox_to_anchor=(1.0, 0.5),
+                  fontsize=8, frameon=False)
+        ax.set_title("critic marginals over training (lines) and of the critic G* is read from (stars)")
+    return _save(fig, path)

@@ -7,6 +7,8 @@ The temporary file is created with mode 0666 filtered by the process umask, exac
 
 This module holds the package's one atomic-write implementation: :func:`atomic_path` (a temporary
 path for writers that need a file name, e.g. ``to_netcdf``) and :func:`atomic_write` (a file handle).
+Writes never follow a symbolic link: an atomic write replaces the link itself, and :func:`append_text`
+(the CSV logs) refuses one.
 
 Checkpoints load with ``torch.load(..., weights_only=True)``: tensors, plain Python data and numpy
 arrays only. A checkpoint that carries any other pickled object (a function, a class) is refused.
@@ -29,7 +31,7 @@ import numpy as np
 import torch
 import yaml
 
-__all__ = ["atomic_path", "atomic_write", "write_text", "write_json", "write_yaml", "save_torch",
+__all__ = ["atomic_path", "atomic_write", "append_text", "write_text", "write_json", "write_yaml", "save_torch",
            "load_checkpoint", "checkpoint_globals", "is_temp_file", "truncate_csv", "CheckpointError"]
 
 _TMP_SUFFIX = ".tmp"
@@ -108,12 +110,28 @@ def atomic_path(path: str | Path, suffix: str = "") -> Iterator[Path]:
     _fsync_dir(path.parent)
 
 
-def atomic_write(path: str | Path, writer: Callable[[Any], None], mode: str = "wb") -> Path:
-    """Write ``path`` atomically through ``writer(file_handle)``; ``mode`` is ``"wb"`` or ``"w"``."""
-    with atomic_path(path) as tmp:
+def atomic_write(path: str | Path, writer: Callable[[Any], None], mode: str = "wb", suffix: str = "") -> Path:
+    """Write ``path`` atomically through ``writer(file_handle)``; ``mode`` is ``"wb"`` or ``"w"``;
+    ``suffix`` ends the temporary file's name (:func:`atomic_path`)."""
+    with atomic_path(path, suffix=suffix) as tmp:
         with open(tmp, mode, **({} if "b" in mode else {"encoding": "utf-8", "newline": ""})) as fh:
             writer(fh)
     return Path(path)
+
+
+def append_text(path: str | Path, text: str) -> None:
+    """Append ``text`` to ``path`` (created like ``open()`` would); a symbolic link there is refused
+    (:class:`RunFileError`), never written through."""
+    path = Path(path)
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW | getattr(os, "O_CLOEXEC", 0), 0o666)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise RunFileError(f"{path}: a symbolic link; a run's logs are written only in its own folder, never "
+                               "through a link; move the link away") from None
+        raise
+    with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
+        fh.write(text)
 
 
 def write_text(path: str | Path, text: str) -> Path:

@@ -34,7 +34,7 @@ from typing import Any
 from stable_baselines3.common.logger import KVWriter, TensorBoardOutputFormat, filter_excluded_keys
 from stable_baselines3.common.logger import Logger as SB3Logger
 
-from .io import RunFileError, damaged_log, write_text
+from .io import RunFileError, append_text, damaged_log, write_text
 
 __all__ = ["Logger", "CSVOutput", "TensorBoardOutput", "read_csv_rows"]
 
@@ -70,8 +70,9 @@ class CSVOutput(KVWriter):
             w.writeheader()
             w.writerows(rows)
             write_text(self.path, buf.getvalue())    # a kill mid-rewrite must not lose the earlier rows
-        with self.path.open("a", newline="") as fh:
-            csv.DictWriter(fh, fieldnames=self.fields).writerow(key_values)
+        buf = io.StringIO(newline="")
+        csv.DictWriter(buf, fieldnames=self.fields).writerow(key_values)
+        append_text(self.path, buf.getvalue())
 
     def close(self) -> None:
         return None

@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
-__all__ = ["rolling_mean", "plot_learning_curve"]
+__all__ = ["rolling_mean", "plot_learning_curve", "plot_run_curve", "read_revisions", "REVISIONS_CSV"]
+
+#: one line per revision of the critic spec (experiments/revise.py writes it; the learning curve marks them)
+REVISIONS_CSV = "revisions.csv"
 
 
 def rolling_mean(x: Sequence[float], window: int) -> np.ndarray:
@@ -48,3 +51,30 @@ def plot_learning_curve(steps: Sequence[float], returns: Sequence[float], succes
     fig.tight_layout()
     atomic_write(path, lambda fh: fig.savefig(fh, format="png", dpi=110))
     return Path(path)
+
+
+def read_revisions(run_dir: str | Path) -> list[dict[str, str]]:
+    """The rows of ``RUN/revisions.csv`` (none for a run never revised)."""
+    from .logger import read_csv_rows
+
+    return read_csv_rows(Path(run_dir) / REVISIONS_CSV)
+
+
+def plot_run_curve(run_dir: str | Path, resolved: dict[str, Any] | None = None,
+                   path: str | Path | None = None) -> Path | None:
+    """``learning_curve.png`` of a run (default ``RUN/learning_curve.png``) from its metrics.csv, with a
+    dotted vertical line at the env step of each revision of its critic spec; None without episodes."""
+    from .checkpoint import run_config
+    from .logger import read_csv_rows
+
+    run_dir = Path(run_dir)
+    rows = read_csv_rows(run_dir / "metrics.csv", required=("env_steps", "return", "success"))
+    if not rows:
+        return None
+    if resolved is None:
+        resolved = run_config(run_dir)
+    path = Path(path) if path is not None else run_dir / "learning_curve.png"
+    title = f"{resolved['agent']} on {resolved['task']} (seed {resolved['seed']})"
+    steps, rets, succ = ([float(r[k]) for r in rows] for k in ("env_steps", "return", "success"))
+    revisions = [(int(r["revision"]), float(r["env_steps"])) for r in read_revisions(run_dir)]
+    return plot_learning_curve(steps, rets, succ, path, title=title, revisions=revisions)

@@ -135,3 +135,12 @@ def test_a_folder_that_refuses_the_temporary_file_is_reported_by_the_files_own_n
     with pytest.raises(OSError) as err:
         io_mod.write_json(tmp_path / "eval.json", {"a": 1})
     assert err.value.filename == str(tmp_path / "eval.json") and err.value.strerror == "Operation not permitted"
+
+
+def test_the_package_has_one_atomic_writer(tmp_path):
+    from hubsgo_ppl.diagnostics import arviz, plots
+    from hubsgo_ppl.experiments import io
+
+    assert arviz.atomic_write is io.atomic_write and plots.atomic_write is io.atomic_write
+    path = io.atomic_write(tmp_path / "a.png", lambda fh: fh.write(b"x"), suffix=".png")
+    assert path.read_bytes() == b"x" and [p.name for p in tmp_path.iterdir()] == ["a.png"]

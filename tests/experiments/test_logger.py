@@ -141,3 +141,17 @@ def test_tensorboard_output_closes_its_writer(tmp_path):
     out = TensorBoardOutput(tmp_path)
     out.close()
     assert out.writer.all_writers is None
+
+
+def test_a_log_that_is_a_symlink_is_refused_not_appended_through(tmp_path):
+    from hubsgo_ppl.experiments.io import RunFileError
+    from hubsgo_ppl.experiments.logger import CSVOutput
+
+    target = tmp_path / "elsewhere.csv"
+    target.write_text("episode,x\n0,1\n")
+    link = tmp_path / "metrics.csv"
+    link.symlink_to(target)
+    out = CSVOutput(link)
+    with pytest.raises(RunFileError, match="a symbolic link"):
+        out.write({"episode": 1, "x": 2}, step=1)
+    assert target.read_text() == "episode,x\n0,1\n"

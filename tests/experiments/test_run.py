@@ -278,16 +278,16 @@ def test_resume_before_the_first_checkpoint_starts_afresh(tmp_path, capsys):
 def test_the_agent_is_built_with_the_runs_torch_threads(tmp_path, monkeypatch):
     # a sweep worker sets one thread before anything is built; `hubsgo train` must too, or float
     # reductions made while building (and after) can differ from the sweep's run of the same config
-    import hubsgo_ppl.experiments.run as run_mod
+    import hubsgo_ppl.experiments.driver as driver
 
     seen = []
-    real_build = run_mod._build
+    real_build = driver.build_run
 
     def build(resolved):
         seen.append(torch.get_num_threads())
         return real_build(resolved)
 
-    monkeypatch.setattr(run_mod, "_build", build)
+    monkeypatch.setattr(driver, "build_run", build)
     before = torch.get_num_threads()
     try:
         torch.set_num_threads(2)
@@ -299,7 +299,7 @@ def test_the_agent_is_built_with_the_runs_torch_threads(tmp_path, monkeypatch):
 
 @pytest.mark.parametrize("error", [RuntimeError, KeyboardInterrupt, FloatingPointError])
 def test_an_exception_closes_the_writer_and_the_env(tmp_path, monkeypatch, error):
-    import hubsgo_ppl.experiments.run as run_mod
+    import hubsgo_ppl.experiments.driver as driver
     from hubsgo_ppl.experiments.logger import TensorBoardOutput
 
     seen = {"env_closed": 0, "writers": []}
@@ -309,7 +309,7 @@ def test_an_exception_closes_the_writer_and_the_env(tmp_path, monkeypatch, error
             super().__init__(*args, **kwargs)
             seen["writers"].append(self.writer)
 
-    real_build = run_mod._build
+    real_build = driver.build_run
 
     def build(resolved):
         env, agent = real_build(resolved)
@@ -326,8 +326,8 @@ def test_an_exception_closes_the_writer_and_the_env(tmp_path, monkeypatch, error
         env.close, agent.train_chunk = close, chunk
         return env, agent
 
-    monkeypatch.setattr(run_mod, "TensorBoardOutput", SpyTB)
-    monkeypatch.setattr(run_mod, "_build", build)
+    monkeypatch.setattr(driver, "TensorBoardOutput", SpyTB)
+    monkeypatch.setattr(driver, "build_run", build)
     expected = RunError if error is KeyboardInterrupt else error
     with pytest.raises(expected):
         train(_cfg(steps=300), tmp_path / "run", progress=True)

@@ -1,0 +1,293 @@
+"""The training driver: :func:`train` starts (or resumes) a run in its locked folder, plays the agent's
+training chunks, logs each episode, and calls its callbacks (``experiments/callbacks.py``), as
+Stable-Baselines3's ``learn()`` drives a ``CallbackList``.
+
+``--resume`` continues exactly the recorded run or refuses: from the checkpoint, the CSV logs first cut
+back to it (a run killed with ``kill -9`` logged past it), so a killed-and-resumed run ends with the
+files of an uninterrupted one (TensorBoard hides the events after the checkpoint); before the first
+checkpoint, afresh with the settings ``config.yaml`` records. A run that cannot be built leaves no
+folder of its own behind. Ctrl-C, a full disk or a damaged file end ``train`` with one line
+(:class:`RunError`), the folder as the last checkpoint left it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import sys
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import torch
+
+from ..envs import get_task
+from .callbacks import Callback, CallbackList, TrainingRun, default_callbacks
+from .checkpoint import CHECKPOINT, EPISODE_LOGS, RUN_FILES, read_checkpoint, recorded_run
+from .restore import build_run, restore
+from .io import RunFileError, is_temp_file, truncate_csv, write_yaml
+from .lock import LOCK_FILE, run_folder_lock
+from .logger import CSVOutput, Logger, TensorBoardOutput, read_csv_rows
+from .resolve import check_catalogue, is_catalogue, note_unlinked_goals, resolve_run, warn_goals_left_out
+from .resolved import CHECKPOINT_STEPS, ResolvedRun, RunConfig, RunError
+
+__all__ = ["train"]
+
+
+def train(cfg: RunConfig, out: str | Path, resume: bool = False, progress: bool = True,
+          max_episodes: int | None = None, on_episode: Callable[[Any], None] | None = None,
+          stop_at: int | None = None, callbacks: Sequence[Callback] = ()) -> dict[str, Any]:
+    """Train (or, with ``resume``, continue) a run into the folder ``out``; returns its summary
+    (``run_dir``, ``episodes``, ``env_steps``, ``wall_time``, ``finished``, and ``init_from``,
+    ``settled`` where they apply).
+
+    ``callbacks``: the user's own :class:`Callback` objects, called after the harness's own. ``stop_at``:
+    pause after the episode that reaches this env step (a checkpoint is written; the schedules still run
+    over the whole budget), e.g. to review the critic and revise its spec (``hubsgo revise``) before
+    continuing with ``resume``. ``max_episodes`` stops after that many episodes of this call;
+    ``on_episode(stats)`` is called after each episode. The folder is locked while ``train`` runs;
+    whatever happens, the env, the progress bar and the log files are closed on return."""
+    out = Path(out)
+    if stop_at is not None and int(stop_at) <= 0:
+        raise RunError(f"--stop-at must be a positive env step, got {stop_at}")
+    user = list(callbacks)
+    bad = [type(cb).__name__ for cb in user if not isinstance(cb, Callback)]
+    if bad:
+        raise RunError(f"callbacks must be Callback objects (hubsgo_ppl.experiments.Callback); got {', '.join(bad)}")
+    where = {"phase": "start", "task": str(cfg.task)}
+    try:
+        torch.set_num_threads(int(cfg.threads))     # before anything is built, as in a sweep worker
+        with run_folder_lock(out):
+            return _train(cfg, out, resume, default_callbacks(stop_at, max_episodes, progress, on_episode) + user,
+                          where)
+    except KeyboardInterrupt:
+        raise RunError(_interrupted(out, where)) from None
+
+
+def _interrupted(out: Path, where: dict[str, Any]) -> str:
+    resume = f"`hubsgo train {where['task']} --out {out} --resume`"
+    if where["phase"] == "end":
+        return (f"interrupted at the end of the run; {out / CHECKPOINT} holds its final checkpoint; {resume} "
+                "writes what the end of the run writes (G*, the learning curve)")
+    if (out / CHECKPOINT).is_file():
+        return f"interrupted; {out / CHECKPOINT} holds the last checkpoint; continue with {resume}"
+    if (out / "config.yaml").is_file():
+        return (f"interrupted before the run's first checkpoint; {resume} starts it afresh with the settings "
+                f"{out / 'config.yaml'} records")
+    return "interrupted before the run started; nothing was written"
+
+
+def _train(cfg: RunConfig, out: Path, resume: bool, callbacks: list[Callback], where: dict[str, Any]) -> dict:
+    run, env, agent, wall0, purge = _start(cfg, out, resume)
+    where["task"] = run.task_ref
+    with contextlib.ExitStack() as closing:
+        closing.callback(env.close)
+        torch.set_num_threads(run.threads)
+        logger = Logger([CSVOutput(out / "metrics.csv")])
+        closing.callback(logger.close)
+        logger.outputs.append(TensorBoardOutput(out / "tb", purge_step=purge))
+        state = TrainingRun(out=out, config=run, env=env, agent=agent, logger=logger, wall0=wall0)
+        hooks = CallbackList(callbacks)
+        closing.callback(hooks.on_close, state)
+        where["phase"] = "train"
+        hooks.on_training_start(state)
+        try:
+            while agent.env_steps < run.steps and hooks.on_chunk_start(state):
+                for stats in agent.train_chunk():
+                    state.episodes_this_call += 1
+                    _log_episode(logger, stats, state.wall_time())
+                    hooks.on_episode(state, stats)
+                if not hooks.on_chunk_end(state):
+                    break
+        except FloatingPointError as exc:
+            kept = (f"{out / CHECKPOINT} holds the last checkpoint" if (out / CHECKPOINT).exists()
+                    else "it diverged before its first checkpoint")
+            raise FloatingPointError(f"{exc} (env step {agent.env_steps:,}): training diverged; {kept}; start a new "
+                                     "run (another --out) with lower learning rates, e.g. --set high.lr=3e-4 "
+                                     "--set low.lr=1e-4") from None
+        state.summary.update({"run_dir": str(out), "episodes": agent.episodes, "env_steps": agent.env_steps,
+                              "wall_time": round(state.wall_time(), 2), "finished": state.finished})
+        if run.init_from:
+            state.summary["init_from"] = dict(run.init_from)
+        where["phase"] = "end"
+        hooks.on_training_end(state)
+    return state.summary
+
+
+def _start(cfg: RunConfig, out: Path, resume: bool) -> tuple[ResolvedRun, Any, Any, float, int | None]:
+    """(resolved run, env, agent, wall time so far, TensorBoard purge step) of a new or resumed run."""
+    _refuse_links(out)
+    _check_writable(out)
+    ckpt_path = out / CHECKPOINT
+    started = any((out / name).exists() for name in RUN_FILES)
+    if started and not ckpt_path.exists():
+        _refuse_lost_checkpoint(out)
+    if resume and (ckpt_path.exists() or not started):
+        return _resume(cfg, out)
+    if ckpt_path.exists():
+        raise RunError(f"{out} already holds a run; continue it with --resume or choose another --out")
+    recorded = recorded_run(out) if (out / "config.yaml").exists() else None
+    if resume:          # stopped before its first checkpoint: afresh, exactly as config.yaml records it
+        if recorded is None:
+            raise RunError(f"{out}: the run stopped before its first checkpoint, and its config.yaml is missing or "
+                           "damaged, so --resume cannot rebuild it; start a new run with another --out")
+        if cfg.steps is not None and int(cfg.steps) != recorded.steps:
+            raise RunError(f"{out}: the run stopped before its first checkpoint; --resume starts it afresh with the "
+                           f"budget config.yaml records ({recorded.steps:,} env steps); drop --steps, or choose "
+                           "another --out for a new run")
+        if recorded.init_from:
+            raise RunError(f"{out}: the run started from {recorded.init_from.get('run')} (--init-from) and stopped "
+                           "before its first checkpoint; start it anew with the same command and another --out")
+        check_catalogue(recorded)
+        return _new(recorded, out, None, started, resumed=True)
+    run = resolve_run(cfg)
+    if recorded is not None and not recorded.same_run(run):
+        raise RunError(f"{out} holds a run that stopped before its first checkpoint, with other settings "
+                       "(config.yaml); continue it with --resume, or choose another --out")
+    return _new(run, out, cfg, started, resumed=False)
+
+
+def _resume(cfg: RunConfig, out: Path):
+    ckpt = read_checkpoint(out / CHECKPOINT)
+    _tidy(out, ())
+    for name in EPISODE_LOGS:
+        truncate_csv(out / name, "episode", int(ckpt["episodes"]))
+    done, budget = int(ckpt["env_steps"]), int(ckpt["config"]["hyper"]["steps"])
+    if cfg.steps is not None and int(cfg.steps) != budget:
+        if int(cfg.steps) <= done:
+            raise RunError(f"{out}: the run has already taken {done:,} env steps; pass --steps above {done} "
+                           f"to train on (its budget is {budget:,})")
+    elif done >= budget:
+        print(f"hubsgo: {out} has finished its budget of {budget:,} env steps; nothing to train (pass --steps "
+              f"above {done} to train on)", file=sys.stderr)
+    run, env, agent = restore(out / CHECKPOINT, ckpt, cfg.steps)
+    on_disk = recorded_run(out)
+    if on_disk is None or on_disk.to_dict() != run.to_dict():   # a new budget, a lost or damaged file
+        write_yaml(out / "config.yaml", run.to_dict())
+    # TensorBoard hides the interrupted writer's events after the checkpoint's last episode
+    return run, env, agent, float(ckpt.get("wall_time", 0.0)), agent.env_steps + 1
+
+
+def _new(run: ResolvedRun, out: Path, cfg: RunConfig | None, started: bool, resumed: bool):
+    """A run started afresh (``cfg``: the user's request, for --init-from and --set; None on a resume)."""
+    if run.family == "minigrid" and is_catalogue(run.task_ref) and not resumed:
+        from ..envs.minigrid.bfs import check_reachable
+
+        never = check_reachable(run.task_ref)     # a maze whose goal cannot be reached: SpecError
+        if never is None:
+            print(f"hubsgo: note: {cfg.task}: the maze has too many states to check exactly before training that its "
+                  "goal and sub-goals can be reached; a coarser check over its cells found nothing wrong",
+                  file=sys.stderr)
+        elif never:
+            print(f"hubsgo: warning: {cfg.task}: no state the agent can reach achieves {', '.join(never)}; "
+                  "check the layout (a key behind its own door, a walled-in cell, a cell on lava)", file=sys.stderr)
+    if not resumed:
+        note_unlinked_goals(run)
+    plan = schedules = defaults = None
+    if cfg is not None and cfg.init_from is not None:       # every refusal before anything is written
+        from ..agents.config import set_keys
+        from .transfer import TransferError, continued_schedules, plan_transfer, transfer_defaults
+
+        plain = run.to_dict()
+        try:
+            plan = plan_transfer(plain, cfg.init_from, cfg.transfer)
+        except TransferError as exc:
+            raise RunError(str(exc)) from None
+        user_set = set_keys(cfg.overrides, "loop")
+        schedules = {} if cfg.restart_schedules else continued_schedules(plan, keep=user_set)
+        defaults = transfer_defaults(plan, keep=user_set)
+        plain["hyper"].setdefault("loop", {}).update({**schedules, **defaults})
+        run = ResolvedRun.from_dict(plain)
+    kept = ("config.yaml",) if resumed else ()
+    removed = _tidy(out, tuple(n for n in RUN_FILES if n not in kept))
+    if removed:
+        how = "with the settings config.yaml records" if resumed else ""
+        print(f"hubsgo: {out} has no checkpoint (its run stopped before the first one); removed its partial "
+              f"files ({', '.join(removed)}) and started the run afresh {how}".rstrip(), file=sys.stderr)
+    if run.subgoals and not resumed:
+        left = [n for n in get_task(run.task_ref).catalogue.names if n not in run.subgoals]
+        print(f"hubsgo: model spec {run.model!r} lists {len(run.subgoals)} of the sub-goals of task "
+              f"{run.task!r}; not candidates in this run: {', '.join(left)}", file=sys.stderr)
+        warn_goals_left_out(run.model, run.task_ref, list(run.subgoals))
+    try:
+        env, agent = build_run(run)
+    except BaseException as exc:
+        if cfg is None or not cfg.overrides or not isinstance(exc, (TypeError, ValueError)):
+            raise
+        msg = " ".join(str(exc).split())
+        raise RunError(f"the run cannot be built with --set {' --set '.join(cfg.overrides)}: {msg}") from None
+    try:
+        if plan is not None:
+            from .transfer import TransferError, apply_transfer
+
+            try:
+                init = {**apply_transfer(agent, plan), "schedules": schedules, "defaults": defaults}
+            except TransferError as exc:
+                raise RunError(str(exc)) from None
+            run = run.replace(init_from=init)
+        write_yaml(out / "config.yaml", run.to_dict())
+    except BaseException:
+        env.close()
+        raise
+    return run, env, agent, 0.0, None
+
+
+def _refuse_links(out: Path) -> None:
+    """The run writes only into its own folder: a symbolic link where one of its files goes is refused."""
+    for name in (*RUN_FILES, CHECKPOINT, LOCK_FILE):
+        if (out / name).is_symlink():
+            raise RunError(f"{out / name}: a symbolic link; a run writes its files only into its own folder, never "
+                           "through a link; move the link away (or replace it with the file it points to)")
+
+
+def _refuse_lost_checkpoint(out: Path) -> None:
+    """A run folder without a checkpoint whose logs go past the step of its second one lost it (a run
+    killed in the chunk that crosses the first may log past it unsaved): refuse to start that folder
+    afresh, which would remove the logs."""
+    run = recorded_run(out)
+    every = run.checkpoint_steps if run is not None else CHECKPOINT_STEPS
+    try:
+        rows = read_csv_rows(out / "metrics.csv")
+        last = max((int(float(r["env_steps"])) for r in rows if r.get("env_steps")), default=0)
+    except (RunFileError, KeyError, ValueError):
+        last = 0
+    if last >= 2 * every:
+        raise RunError(f"{out}: {CHECKPOINT} is missing, though metrics.csv reaches env step {last:,}, past the "
+                       f"checkpoints every {every:,} steps; put the checkpoint back, or choose another --out")
+
+
+def _check_writable(out: Path) -> None:
+    try:
+        probe = out / ".write-test"
+        probe.write_text("ok")
+        probe.unlink()
+    except OSError as exc:
+        raise RunError(f"--out {out}: cannot write there ({exc.strerror}); choose a writable folder") from None
+
+
+def _tidy(out: Path, names: tuple[str, ...]) -> list[str]:
+    """Remove ``names`` (files, or folders of TensorBoard events) from ``out`` and temporary files left
+    by interrupted atomic writes of them or of the checkpoint; returns the names removed."""
+    removed = [name for name in names if (out / name).exists()]
+    for path in (out / name for name in removed):
+        if path.is_dir():
+            for event in path.glob("events.out.tfevents.*"):
+                event.unlink()
+            with contextlib.suppress(OSError):
+                path.rmdir()            # only if nothing else is in there
+        else:
+            path.unlink()
+    for path in out.iterdir() if out.is_dir() else ():
+        if any(is_temp_file(path, target) for target in (*RUN_FILES, CHECKPOINT)) and path.is_file():
+            path.unlink()
+    return removed
+
+
+def _log_episode(logger: Logger, stats: Any, wall: float) -> None:
+    row = stats.row()
+    row["wall_time"] = round(wall, 3)
+    for k, v in row.items():
+        logger.record(k, v)
+    logger.dump(stats.env_steps)
+    bad = [k for k, v in stats.scalars.items() if not math.isfinite(float(v))]
+    if bad:
+        raise FloatingPointError(f"non-finite training statistics {bad} at episode {stats.episode}")

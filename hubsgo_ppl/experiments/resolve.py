@@ -1,0 +1,207 @@
+"""Resolving a run: the task, its catalogue, the critic's spec and the hyperparameters of a
+:class:`RunConfig`, checked once, into a :class:`~hubsgo_ppl.experiments.resolved.ResolvedRun`; the notes and
+warnings a user sees about what was resolved."""
+
+from __future__ import annotations
+
+import platform
+import sys
+from pathlib import Path
+from typing import Any, Mapping
+
+import torch
+
+from .. import __version__
+from ..agents.config import ConfigError, resolve_hyper
+from ..envs import get_task
+from ..envs.subset import catalogue_order, check_subset
+from .io import CheckpointError
+from .resolved import ResolvedRun, RunConfig, RunError, as_resolved
+
+__all__ = ["resolve", "resolve_run", "task_ref", "catalogue_digest", "check_catalogue", "is_catalogue", "task_goals",
+           "warn_goals_left_out", "note_unlinked_goals"]
+
+
+def task_ref(task: str | Path) -> str:
+    """How a run's config names its task: a built-in name as given, a user's catalogue by its absolute
+    path, so that the run can be evaluated, reviewed, revised and resumed from any folder."""
+    return str(Path(task).resolve()) if is_catalogue(task) else str(task)
+
+
+def is_catalogue(task: str | Path) -> bool:
+    return Path(str(task)).suffix in (".yaml", ".yml")
+
+
+def catalogue_digest(path: str | Path) -> str:
+    """SHA-256 of a user's catalogue and the layout file it names: a run records it, and a run read
+    later says so where the files have changed since."""
+    import hashlib
+
+    import yaml
+
+    path = Path(path)
+    h = hashlib.sha256(path.read_bytes())
+    try:
+        options = (yaml.safe_load(path.read_text(encoding="utf-8")) or {}).get("options") or {}
+    except (UnicodeDecodeError, yaml.YAMLError, AttributeError):
+        return h.hexdigest()            # a damaged catalogue: its own bytes say it changed
+    layout = options.get("layout") if isinstance(options, dict) else None
+    if isinstance(layout, str) and (path.parent / layout).is_file():
+        h.update((path.parent / layout).read_bytes())
+    return h.hexdigest()
+
+
+def check_catalogue(run: ResolvedRun | Mapping[str, Any]) -> bool:
+    """Before a run is rebuilt: refuse (one line) a user's catalogue that has gone, and warn (and say
+    True) where it has changed since the run recorded it."""
+    run = as_resolved(run)
+    ref = run.task_ref
+    if not is_catalogue(ref):
+        return False
+    if not Path(ref).is_file():
+        raise RunError(f"{ref}: the run's task catalogue is no longer there; put it (and its layout) back at that "
+                       "path to read or resume the run")
+    recorded = run.task_digest
+    if recorded is not None and catalogue_digest(ref) != recorded:
+        print(f"hubsgo: warning: {ref} (or its layout) has changed since the run recorded it; the run is read "
+              "with the files as they are now", file=sys.stderr)
+        return True
+    return False
+
+
+def resolve(cfg: RunConfig) -> dict[str, Any]:
+    """Everything a run needs, as plain data (written to config.yaml and into checkpoints)."""
+    return resolve_run(cfg).to_dict()
+
+
+def resolve_run(cfg: RunConfig) -> ResolvedRun:
+    """Everything a run needs, typed (:class:`ResolvedRun`)."""
+    info = get_task(cfg.task)
+    if cfg.steps is not None and cfg.steps <= 0:
+        raise RunError(f"--steps must be positive, got {cfg.steps}")
+    if int(cfg.checkpoint_steps) <= 0:
+        raise RunError(f"checkpoint_steps must be a positive number of env steps, got {cfg.checkpoint_steps}")
+    for name in ("history_every", "threads"):
+        value = getattr(cfg, name)
+        if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
+            raise RunError(f"{name} must be a positive whole number, got {value!r}")
+    if isinstance(cfg.seed, bool) or not isinstance(cfg.seed, int) or cfg.seed < 0:
+        raise RunError(f"a seed is a whole number, 0 or more; got {cfg.seed!r}")
+    budget_set = [o for o in cfg.overrides if o.split("=", 1)[0].strip() == "steps"]
+    if cfg.steps is not None and budget_set:
+        raise RunError(f"the budget is given twice, --steps {cfg.steps} and --set {budget_set[-1]}; give it once")
+    try:        # the preset, the task's settings and --set merged and validated (agents/config.py)
+        hyper = resolve_hyper(info.family, info.name, cfg.agent, cfg.overrides, steps=cfg.steps,
+                              low_level=cfg.low_level)
+    except ValueError as exc:           # a ConfigError always; another ValueError where --set caused it
+        if not (cfg.overrides or isinstance(exc, ConfigError)):
+            raise
+        raise RunError(str(exc)) from None
+    budget = hyper.get("steps")
+    if isinstance(budget, bool) or not isinstance(budget, int) or budget <= 0:    # --set steps=0 as --steps 0
+        raise RunError(f"--steps must be positive, got {budget!r} (from --set steps=...)")
+    ref = task_ref(cfg.task)
+    resolved: dict[str, Any] = {
+        "task": info.name, "task_ref": ref, "family": info.family,
+        **({"task_digest": catalogue_digest(ref)} if is_catalogue(cfg.task) else {}),
+        "agent": cfg.agent, "seed": int(cfg.seed), "hyper": hyper,
+        "checkpoint_steps": int(cfg.checkpoint_steps), "history_every": cfg.history_every, "threads": cfg.threads,
+        "versions": {"hubsgo_ppl": __version__, "torch": str(torch.__version__), "python": platform.python_version()},
+    }
+    names = info.catalogue.names
+    if cfg.graph is not None and cfg.agent != "hubsgo":
+        raise RunError(f"--graph {cfg.graph} sets the critic's graph, and agent {cfg.agent!r} has no critic; "
+                       "drop --graph, or train --agent hubsgo")
+    if cfg.agent == "hubsgo" or cfg.model is not None:
+        from ..specs import SpecError, list_model_specs, load_model_spec, match_subgoals
+
+        model = cfg.model or f"{info.name}-specific"
+        missing = cfg.model is None and model not in list_model_specs()
+        inherited = None
+        if missing and cfg.init_from is not None:
+            inherited = _source_spec(cfg.init_from)     # a user's maze started from another run: that run's spec
+        if missing and inherited is None:
+            raise SpecError(f"task {info.name!r} has no built-in critic spec {model}: write one (its sub-goals, "
+                            "your signed edges, the prior and the likelihood; models/keydoor-specific.yaml is an "
+                            "example) and pass it with --model my_spec.yaml")
+        if inherited is not None:
+            spec = inherited if cfg.graph is None else inherited.model_copy(update={"graph": cfg.graph})
+            model = spec.name
+            print(f"hubsgo: note: no --model: the critic spec of the --init-from run, {spec.name!r}", file=sys.stderr)
+        else:
+            spec = load_model_spec(model, graph=cfg.graph)
+        source = f"model spec {model!r} for task {info.name!r}"
+        if set(spec.subgoals) >= set(names):
+            spec = match_subgoals(spec, list(names), source)
+        else:       # some of the catalogue's sub-goals: the run's candidates are those (envs/subset.py)
+            check_subset(spec.subgoals, names, source)
+            spec = spec.model_copy(update={"subgoals": catalogue_order(spec.subgoals, names)})
+            resolved["subgoals"] = list(spec.subgoals)
+        resolved["model_spec"] = spec.model_dump(mode="json")
+        resolved["model"] = spec.name
+        if cfg.model is None and inherited is None and is_catalogue(cfg.task):
+            print(f"hubsgo: note: no --model: the built-in spec {model!r}, named after the catalogue's task "
+                  f"{info.name!r}; pass --model to use your own", file=sys.stderr)
+        if spec.task is not None and spec.task != info.name:     # it fits (above); say whose it was
+            print(f"hubsgo: note: model spec {spec.name!r} names task {spec.task!r}; it is used for {info.name!r}, "
+                  "its sub-goals matched by name", file=sys.stderr)
+        if cfg.graph is None and spec.graph == "independent" and spec.edges:
+            print(f"hubsgo: note: model spec {spec.name!r} has graph independent, so its edges ({len(spec.edges)}) "
+                  "are not used; graph specific uses them", file=sys.stderr)
+    return ResolvedRun.from_dict(resolved, "the resolved run")
+
+
+def _source_spec(run_dir: str | Path) -> Any:
+    """The critic spec a run was trained with, or None where it has none."""
+    from ..specs import ModelSpec
+
+    from .checkpoint import run_config
+
+    try:
+        spec = run_config(run_dir).get("model_spec")
+    except (RunError, CheckpointError):
+        return None             # the transfer's own checks name what is wrong with that run
+    return ModelSpec.model_validate(spec) if isinstance(spec, dict) else None
+
+
+def task_goals(task_ref: str) -> list[str]:
+    """The names of the task catalogue's ``goal`` sub-goals."""
+    return [d.name for d in get_task(task_ref).catalogue.subgoals if d.kind == "goal"]
+
+
+def warn_goals_left_out(spec_name: str, task_ref: str, subgoals: list[str] | None) -> None:
+    """One warning line when a run's candidate set (a spec's ``subgoals``; None: the whole catalogue)
+    leaves out the task's goal: the high level can never choose it, so the agent reaches it only by chance."""
+    missing = [g for g in task_goals(task_ref) if g not in subgoals] if subgoals else []
+    if missing:
+        print(f"hubsgo: warning: model spec {spec_name!r} leaves out {', '.join(missing)} (the task's goal): the high "
+              "level can never choose it, so the agent reaches it only by chance; add it to subgoals and link the "
+              "last sub-goal of each route to it", file=sys.stderr)
+
+
+def _unlinked_goals(run: ResolvedRun) -> list[str]:
+    """The catalogue's ``goal`` sub-goals that a ``specific`` spec links to nothing by a positive edge,
+    where its Ising prior's negative field outweighs what the outcome likelihood makes of a sub-goal
+    every success achieves (``OutcomeLikelihood.mismatch_nats``): G* then leaves them out
+    (docs/results.md, "How strongly the successes speak")."""
+    from ..infer.likelihoods import get_likelihood
+
+    spec = run.model_spec
+    prior, lik = ((spec or {}).get(k) or {} for k in ("prior", "likelihood"))
+    if not spec or spec.get("graph") != "specific" or prior.get("name") != "ising" or lik.get("name") != "outcome":
+        return []
+    outcome = get_likelihood("outcome", **{k: v for k, v in lik.items() if k != "name"})
+    if outcome.mismatch_nats > -float(prior.get("field", 0.0)):
+        return []
+    linked = {end for u, v, sign in spec.get("edges", []) if sign == "positive" for end in (u, v)}
+    return [g for g in task_goals(run.task_ref) if g in spec["subgoals"] and g not in linked]
+
+
+def note_unlinked_goals(run: ResolvedRun | Mapping[str, Any]) -> None:
+    """A one-line note on stderr for each run (new or revised) whose spec leaves the goal unlinked."""
+    run = as_resolved(run)
+    unlinked = _unlinked_goals(run)
+    if unlinked:
+        print(f"hubsgo: note: model spec {run.model!r} gives {', '.join(unlinked)} (the task's goal) no "
+              "positive edge, so its prior's field keeps it out of G*; link the last sub-goal of each route "
+              "to it (e.g. [a_door, goal, positive])", file=sys.stderr)
