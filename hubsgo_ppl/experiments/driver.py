@@ -22,7 +22,7 @@ import torch
 
 from ..envs import get_task
 from .callbacks import Callback, CallbackList, TrainingRun, default_callbacks
-from .checkpoint import CHECKPOINT, EPISODE_LOGS, RUN_FILES, read_checkpoint, recorded_run
+from .checkpoint import CHECKPOINT, EPISODE_LOGS, RUN_FILES, read_checkpoint, read_config_file, recorded_run
 from .restore import build_run, restore
 from .io import RunFileError, is_temp_file, truncate_csv, write_yaml
 from .lock import LOCK_FILE, run_folder_lock
@@ -243,8 +243,11 @@ def _refuse_lost_checkpoint(out: Path) -> None:
     """A run folder without a checkpoint whose logs go past the step of its second one lost it (a run
     killed in the chunk that crosses the first may log past it unsaved): refuse to start that folder
     afresh, which would remove the logs."""
-    run = recorded_run(out)
-    every = run.checkpoint_steps if run is not None else CHECKPOINT_STEPS
+    recorded = read_config_file(out) or {}      # a config.yaml of a run killed while it was written counts too
+    try:
+        every = max(int(recorded.get("checkpoint_steps", CHECKPOINT_STEPS)), 1)
+    except (TypeError, ValueError):
+        every = CHECKPOINT_STEPS
     try:
         rows = read_csv_rows(out / "metrics.csv")
         last = max((int(float(r["env_steps"])) for r in rows if r.get("env_steps")), default=0)
