@@ -60,7 +60,7 @@ RunSettings = create_model("RunSettings", __base__=Settings, steps=(integer(1), 
 
 
 def _check_item(item: str, base: dict[str, Any], hyper: dict[str, Any], models: dict[str, type[Settings]],
-                agent: str) -> None:
+                agent: str, run_defaults: dict[str, Any]) -> None:
     """Validate one ``--set`` item against the merged settings ``hyper``; its value, validated, goes back
     into ``hyper``. Nested keys, and sections the agent does not read, are checked where they are used."""
     key, _, _ = item.partition("=")
@@ -76,7 +76,7 @@ def _check_item(item: str, base: dict[str, Any], hyper: dict[str, Any], models: 
             raise ConfigError(f"unknown setting {name!r}; settings: {', '.join(plain)}; sections: "
                               f"{', '.join(sections)}", None, name)
         if name in RunSettings.model_fields:
-            hyper[name] = getattr(validate("", RunSettings, {name: hyper[name]}, defaults=base), name)
+            hyper[name] = getattr(validate("", RunSettings, {name: hyper[name]}, defaults=run_defaults), name)
         return
     if len(parts) == 2 and parts[0] in models:
         section, name = parts
@@ -99,6 +99,7 @@ def resolve_hyper(family: str, task: str | None, agent: str, overrides: list[str
     were given, and every section ``agent`` reads checked whole. Errors are one line; those of an
     override start ``--set ITEM:``."""
     hyper = preset(family, task)
+    defaults = {k: hyper[k] for k in RunSettings.model_fields if k in hyper}      # the family's, named in errors
     if steps is not None:
         hyper["steps"] = int(steps)
     default_low = hyper.get("low_level")
@@ -114,10 +115,10 @@ def resolve_hyper(family: str, task: str | None, agent: str, overrides: list[str
     models = _models(agent, family, str(hyper.get("low_level", "learned")))
     for item in overrides:
         try:
-            _check_item(item, base, hyper, models, agent)
+            _check_item(item, base, hyper, models, agent, defaults)
         except ConfigError as exc:
             raise ConfigError(f"--set {item}: {exc}", exc.section, exc.key) from None
-    validate("", RunSettings, {k: hyper[k] for k in RunSettings.model_fields if k in hyper}, defaults=base)
+    validate("", RunSettings, {k: hyper[k] for k in RunSettings.model_fields if k in hyper}, defaults=defaults)
     classes = section_classes(agent, family, str(hyper.get("low_level", "learned")))
     for section, cls in classes.items():
         derived = {k: int(hyper["steps"]) for k in DERIVED if k in cls.model_fields}

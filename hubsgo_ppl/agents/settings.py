@@ -278,8 +278,8 @@ class ScriptedMazeConfig(Settings):
 class ScriptedOSCConfig(Settings):
     """The scripted arm low level (:class:`~.scripted_osc.ScriptedOSC`)."""
 
-    gain: Rate = 20.0
-    tolerance: Rate = 0.002
+    gain: Rate = 20.0                # action per metre
+    tolerance: NonNegative = 0.002   # metres
 
 
 class HIROConfig(Settings):
