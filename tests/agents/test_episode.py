@@ -1,7 +1,6 @@
 """The episode skeleton: the metrics row of an episode, its reset seed and options, success from reset."""
 
 import numpy as np
-import pytest
 
 from hubsgo_ppl.agents.episode import EpisodeStats, EpisodeTally, reset_episode
 from hubsgo_ppl.agents.seeding import episode_seed

@@ -59,16 +59,3 @@ def test_update_reduces_td_loss_on_a_fixed_problem():
     for _ in range(200):
         last = dqn.update(None)[0]["high/td_loss"]
     assert last < 0.1 * first
-
-
-def _rows_of_flags(n: int, width: int = 3):
-    """A stand-in for an env's subgoal_features: obs (..., n + width) -> rows whose column 0 is the
-    sub-goal's own flag (obs[..., i]) and the rest the shared tail."""
-    def feat(obs):
-        flags = obs[..., :n].unsqueeze(-1)
-        tail = obs[..., n:].unsqueeze(-2).expand(*obs.shape[:-1], n, width)
-        return torch.cat([flags, tail], -1)
-
-    feat.dim, feat.flag = 1 + width, 0
-    return feat
-
