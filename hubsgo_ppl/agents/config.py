@@ -16,18 +16,13 @@ from .presets import apply_overrides, preset
 from .settings import (DERIVED, ConfigError, choice, GoalDQNConfig, GoalTD3Config, HighLevelConfig, HIROConfig, LoopConfig,
                        ScriptedMazeConfig, ScriptedOSCConfig, Settings, integer, sb3_model, validate)
 
-__all__ = ["ConfigError", "section_model", "section_classes", "make_config", "resolve_hyper", "set_keys",
+__all__ = ["ConfigError", "section_classes", "make_config", "resolve_hyper", "set_keys",
            "HIERARCHICAL", "SB3_SECTIONS"]
 
 #: the agents that run the HRL loop (sections loop, high, low)
 HIERARCHICAL = ("hubsgo", "hdqn")
 #: flat baselines -> the preset section holding their Stable-Baselines3 arguments
 SB3_SECTIONS = {"dqn": "dqn", "ddqn": "dqn", "ppo": "ppo", "td3": "td3"}
-
-
-def section_model(section: str, cls: type[Settings]) -> type[Settings]:
-    """The model that checks ``section``: its settings class (kept for callers that name both)."""
-    return cls
 
 
 def make_config(section: str, cls: type[Settings], values: dict[str, Any], **derived: Any) -> Settings:
