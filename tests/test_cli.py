@@ -462,12 +462,12 @@ def test_resume_refuses_flags_that_would_change_the_run_and_keeps_config_yaml_wi
 
 
 @pytest.mark.parametrize("setting, line", [
-    ("loop.option_steps=0", "loop.option_steps must be at least 1 (default 10), got 0"),
-    ("loop.gamma=nan", "loop.gamma must be a finite number (default 0.99), got 'nan'"),
-    ("high.lr=inf", "high.lr must be a finite number (default 0.001), got 'inf'"),
-    ("low.lr=0", "low.lr must be above 0 (default 0.0005), got 0"),
-    ("high.hidden=[0]", "high.hidden must be a list of positive layer sizes (default [128, 128]), got [0]"),
-    ("loop.explore_fraction=0", "loop.explore_fraction must be in (0, 1] (default 0.3), got 0"),
+    ("loop.option_steps=0", "loop.option_steps takes an integer >= 1 (default 10), got 0"),
+    ("loop.gamma=nan", "loop.gamma takes a number in [0, 1] (default 0.99), got 'nan'"),
+    ("high.lr=inf", "high.lr takes a finite number > 0 (default 0.001), got 'inf'"),
+    ("low.lr=0", "low.lr takes a finite number > 0 (default 0.0005), got 0"),
+    ("high.hidden=[0]", "high.hidden takes a list of integers >= 1, e.g. [64, 64] (default [128, 128]), got [0]"),
+    ("loop.explore_fraction=0", "loop.explore_fraction takes a number in (0, 1] (default 0.3), got 0"),
 ])
 def test_a_setting_out_of_its_range_is_refused_before_the_run_starts(setting, line, capsys, tmp_path):
     out = tmp_path / "o"

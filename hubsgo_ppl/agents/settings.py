@@ -91,7 +91,8 @@ def number(lo: float | None = None, hi: float | None = None, lo_open: bool = Fal
     """A finite number (``"3e-4"`` accepted) in the range given (``*_open``: the bound itself excluded)."""
     bounds = {("gt" if lo_open else "ge"): lo, ("lt" if hi_open else "le"): hi}
     return Annotated[StrictFloat, BeforeValidator(_number),
-                     Field(allow_inf_nan=False, description="a number" + _range(lo, hi, lo_open, hi_open),
+                     Field(allow_inf_nan=False, description=("a number" if hi is not None else "a finite number")
+                           + _range(lo, hi, lo_open, hi_open),
                            **{k: v for k, v in bounds.items() if v is not None})]
 
 

@@ -110,7 +110,7 @@ def test_ranges_are_declared_only_on_the_settings_models():
     ("loop.filter_end=1.5", "--set loop.filter_end=1.5: loop.filter_end takes a number in [0, 1] (default 0.9), got 1.5"),
     ("loop.filter_refresh=always", "--set loop.filter_refresh=always: loop.filter_refresh takes one of 'option', "
                                    "'episode' (default 'episode'), got 'always'"),
-    ("high.lr=fast", "--set high.lr=fast: high.lr takes a number > 0 (default 0.001), got 'fast'"),
+    ("high.lr=fast", "--set high.lr=fast: high.lr takes a finite number > 0 (default 0.001), got 'fast'"),
     ("high.double_q=2", "--set high.double_q=2: high.double_q takes true or false (default True), got 2"),
     ("low.hidden=[0]", "--set low.hidden=[0]: low.hidden takes a list of integers >= 1, e.g. [64, 64] (default [128, 128]), got [0]"),
     ("loop.settle_at=0", "--set loop.settle_at=0: loop.settle_at takes a number in (0, 1], or null (default 0.9), got 0"),
@@ -140,7 +140,7 @@ def test_make_config_validates_keys_and_kinds_in_one_line():
     assert cfg.lr == 3e-4 and cfg.buffer_size == 100_000 and cfg.hidden == (8, 8)
     with pytest.raises(ConfigError, match=r"^low.gamma takes a number in \[0, 1\) \(default 0.95\), got 1.0$"):
         make_config("low", GoalTD3Config, {"gamma": 1.0})
-    with pytest.raises(ConfigError, match=r"^high.lr takes a number > 0 \(default 0.001\), got inf$"):
+    with pytest.raises(ConfigError, match=r"^high.lr takes a finite number > 0 \(default 0.001\), got inf$"):
         make_config("high", HighLevelConfig, {"lr": float("inf")})
 
 
