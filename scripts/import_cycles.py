@@ -1,13 +1,13 @@
-"""Import cycles between the packages of hubsgo_ppl (and, with ``--modules``, between its modules).
+"""Import cycles between the packages of hubsgo_ppl and between its modules.
 
 Every ``import`` and ``from ... import`` in ``hubsgo_ppl/**.py`` counts, wherever it stands: at module
 level, inside a function, or under ``if TYPE_CHECKING``. At package level each module belongs to
 ``hubsgo_ppl.<first name>`` (a subpackage such as ``hubsgo_ppl.infer`` or a top-level module such as
-``hubsgo_ppl.specs``); imports within one package are ignored. A cycle is a strongly connected
-component of two or more nodes.
+``hubsgo_ppl.specs``); imports within one package are ignored there, and counted between its modules
+(``agents.config`` -> ``agents.hiro`` -> ``agents.config`` is a module cycle). A cycle is a strongly
+connected component of two or more nodes.
 
-    python scripts/import_cycles.py            # package graph and its cycles; exit status 1 on a cycle
-    python scripts/import_cycles.py --modules  # also module-level cycles (reported, not failed on)
+    python scripts/import_cycles.py            # the package graph, package and module cycles; exit 1 on any
     python scripts/import_cycles.py --json     # {"edges": ..., "cycles": ..., "module_cycles": ...}
 """
 
@@ -118,30 +118,26 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--modules", action="store_true", help="also report module-level cycles")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     args = parser.parse_args(argv)
     modules = module_graph()
     packages = package_graph(modules)
     found = cycles(packages)
-    module_cycles = cycles(modules) if args.modules else None
+    module_cycles = cycles(modules)
     if args.json:
-        out = {"edges": {k: sorted(v) for k, v in sorted(packages.items())}, "cycles": found}
-        if module_cycles is not None:
-            out["module_cycles"] = module_cycles
-        print(json.dumps(out, indent=1))
-        return 1 if found else 0
+        print(json.dumps({"edges": {k: sorted(v) for k, v in sorted(packages.items())}, "cycles": found,
+                          "module_cycles": module_cycles}, indent=1))
+        return 1 if found or module_cycles else 0
     print(f"{len(packages)} packages, {sum(map(len, packages.values()))} import edges between them")
     for src in sorted(packages):
         print(f"  {src} -> {', '.join(sorted(packages[src])) or '(nothing)'}")
     print(f"package cycles: {len(found)}")
     for c in found:
         print("  " + " <-> ".join(c))
-    if module_cycles is not None:
-        print(f"module cycles: {len(module_cycles)}")
-        for c in module_cycles:
-            print("  " + " <-> ".join(c))
-    return 1 if found else 0
+    print(f"module cycles: {len(module_cycles)}")
+    for c in module_cycles:
+        print("  " + " <-> ".join(c))
+    return 1 if found or module_cycles else 0
 
 
 if __name__ == "__main__":

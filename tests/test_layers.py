@@ -1,4 +1,5 @@
-"""The package layering: no import cycle between hubsgo_ppl's packages (scripts/import_cycles.py)."""
+"""The package layering: no import cycle between hubsgo_ppl's packages nor between its modules
+(scripts/import_cycles.py)."""
 
 import importlib.util
 import subprocess
@@ -23,6 +24,26 @@ def test_no_import_cycle_between_packages():
     assert ic.cycles(packages) == [], ic.cycles(packages)
 
 
+def test_no_import_cycle_between_modules():
+    """Every module of the package, however it imports (at module level or inside a function)."""
+    ic = _load()
+    modules = ic.module_graph()
+    assert "hubsgo_ppl.agents.config" in modules and "hubsgo_ppl.agents.hiro" in modules
+    assert ic.cycles(modules) == [], ic.cycles(modules)
+
+
+def test_a_module_cycle_inside_one_package_is_found(tmp_path):
+    ic = _load()
+    pkg = tmp_path / "hubsgo_ppl"
+    for name, text in {"__init__.py": "", "a/__init__.py": "", "a/config.py": "def f():\n    from .hiro import g\n",
+                       "a/hiro.py": "from .config import f\n", "a/other.py": "from . import config\n"}.items():
+        (pkg / name).parent.mkdir(parents=True, exist_ok=True)
+        (pkg / name).write_text(text)
+    modules = ic.module_graph(tmp_path)
+    assert ic.cycles(ic.package_graph(modules)) == []                  # one package: no package cycle
+    assert ic.cycles(modules) == [["hubsgo_ppl.a.config", "hubsgo_ppl.a.hiro"]]
+
+
 def test_lower_layers_do_not_import_upper_ones():
     """graph -> distributions -> infer -> specs: each imports only from the ones before it."""
     packages = _load().package_graph(_load().module_graph())
@@ -42,4 +63,4 @@ def test_the_script_finds_a_cycle_and_exits_1(tmp_path):
     assert ic.cycles(ic.package_graph(ic.module_graph(tmp_path))) == [["hubsgo_ppl.x", "hubsgo_ppl.y"]]
     out = subprocess.run([sys.executable, str(SCRIPT)], capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert out.returncode == 0, out.stdout + out.stderr
-    assert "package cycles: 0" in out.stdout
+    assert "package cycles: 0" in out.stdout and "module cycles: 0" in out.stdout

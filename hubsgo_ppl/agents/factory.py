@@ -22,11 +22,12 @@ import torch
 
 from .config import HIERARCHICAL, make_config
 from .filters import CriticFilter, NoFilter
-from .high_level import HighLevelConfig, HighLevelDQN, linked_rows
-from .loop import HRLLoop, LoopConfig
-from .low_level import GoalDQN, GoalDQNConfig, ScriptedLowLevel
+from .high_level import HighLevelDQN
+from .loop import HRLLoop
+from .low_level import GoalDQN, ScriptedLowLevel
 from .protocols import LowLevel
 from .seeding import HIGH_LEVEL_STREAM, LOW_LEVEL_STREAM, NET_INIT_STREAM, stream_generator, stream_rng
+from .settings import GoalDQNConfig, HighLevelConfig, LoopConfig, ScriptedMazeConfig, ScriptedOSCConfig
 
 __all__ = ["BUILDERS", "build_agent", "agent_names", "HIERARCHICAL"]
 
@@ -36,17 +37,16 @@ def _low_level(kind: str, env: gym.Env, n_goals: int, low_cfg: dict, gen: torch.
     obs_dim = int(np.prod(env.observation_space.shape))
     if kind == "learned" and isinstance(env.action_space, gym.spaces.Discrete):
         potential = getattr(env.unwrapped, "subgoal_potential", lambda: None)()
-        features = getattr(env.unwrapped, "subgoal_features", lambda: None)()
         return GoalDQN(obs_dim, n_goals, int(env.action_space.n), make_config("low", GoalDQNConfig, low_cfg), gen,
-                       rng, potential=potential, features=features)
+                       rng, potential=potential)
     if kind == "scripted" and isinstance(env.action_space, gym.spaces.Discrete):
         from .scripted_maze import ScriptedMaze
 
-        return ScriptedLowLevel(make_config("low", ScriptedMaze, low_cfg))
+        return ScriptedLowLevel(ScriptedMaze(**make_config("low", ScriptedMazeConfig, low_cfg).model_dump()))
     if kind == "scripted":
         from .scripted_osc import ScriptedOSC
 
-        return ScriptedLowLevel(make_config("low", ScriptedOSC, low_cfg))
+        return ScriptedLowLevel(ScriptedOSC(**make_config("low", ScriptedOSCConfig, low_cfg).model_dump()))
     if kind == "learned":
         from .td3_her import GoalTD3
 
@@ -54,32 +54,20 @@ def _low_level(kind: str, env: gym.Env, n_goals: int, low_cfg: dict, gen: torch.
     raise ValueError(f"unknown low level {kind!r}; use 'learned' or 'scripted'")
 
 
-def _high_features(env: gym.Env, names: list[str], critic: Any, config: HighLevelConfig) -> Any:
-    """The high level's per-sub-goal rows (:func:`linked_rows`) with the spec's edges, or None."""
-    features = getattr(env.unwrapped, "subgoal_features", lambda: None)() if config.goal_features else None
-    if features is None:
-        return None
-    graph = getattr(critic, "graph", None)
-    edges = [] if graph is None else [(names.index(u), names.index(v), s) for u, v, s in graph.edges]
-    return linked_rows(features, len(names), edges)
-
-
 def build_hierarchical(agent: str, env: gym.Env, cfg: dict[str, Any], seed: int, critic: Any = None) -> HRLLoop:
-    names = list(env.unwrapped.subgoal_names)
-    n = len(names)
+    n = len(env.unwrapped.subgoal_names)
     gen = stream_generator(seed, NET_INIT_STREAM)
     high_rng = stream_rng(seed, HIGH_LEVEL_STREAM)
     low_rng = stream_rng(seed, LOW_LEVEL_STREAM)
     obs_dim = int(np.prod(env.observation_space.shape))
     loop_cfg = make_config("loop", LoopConfig, cfg.get("loop", {}), total_steps=int(cfg["steps"]))
     high_cfg = make_config("high", HighLevelConfig, cfg.get("high", {}))
-    high = HighLevelDQN(obs_dim, n, high_cfg, gen, high_rng, features=_high_features(env, names, critic, high_cfg))
+    high = HighLevelDQN(obs_dim, n, high_cfg, gen, high_rng)
     low = _low_level(cfg.get("low_level", "learned"), env, n, cfg.get("low", {}), gen, low_rng)
     if agent == "hubsgo":
         if critic is None:
             raise ValueError("the hubsgo agent needs a critic (built from a model spec)")
-        filt = CriticFilter(critic, loop_cfg.outcome_window, loop_cfg.filter_keep, loop_cfg.filter_before_update,
-                            loop_cfg.filter_fallback)
+        filt = CriticFilter(critic, loop_cfg.outcome_window, loop_cfg.filter_keep, loop_cfg.filter_before_update)
     elif agent == "hdqn":
         filt = NoFilter()
     else:

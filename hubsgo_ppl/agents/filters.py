@@ -30,17 +30,9 @@ from typing import Any, Protocol
 import numpy as np
 import torch
 
-from ..infer.readout import FALLBACK
 from .high_level import HighLevelBatch
 
-__all__ = ["SubgoalFilter", "CriticFilter", "NoFilter", "BEFORE_UPDATE"]
-
-#: what Ĝt is before the critic's first update (with an outcome likelihood: before the first success):
-#: "g0", no filter; "completion", the configuration q favours most among those holding the sub-goals
-#: achieved so far. q starts at the prior, so the human's edges then steer the high level from the
-#: first episode: holding a key, Ĝt is its door and the goal; holding nothing, the completion is
-#: empty and the high level reads G0.
-BEFORE_UPDATE = ("g0", "completion")
+__all__ = ["SubgoalFilter", "CriticFilter", "NoFilter"]
 
 
 class SubgoalFilter(Protocol):
@@ -92,16 +84,9 @@ class CriticFilter:
     name = "critic"
 
     def __init__(self, critic: Any, outcome_window: int = 20, keep_fraction: float = 1.0,
-                 before_update: str = "g0", fallback: str = "mode"):
-        if before_update not in BEFORE_UPDATE:
-            raise ValueError(f"loop.filter_before_update must be one of {', '.join(BEFORE_UPDATE)}, got {before_update!r}")
-        if fallback not in FALLBACK:
-            raise ValueError(f"loop.filter_fallback must be one of {', '.join(FALLBACK)}, got {fallback!r}")
-        self.fallback = fallback
-        if int(outcome_window) < 1:
-            raise ValueError(f"loop.outcome_window must be a positive integer, got {outcome_window!r}")
-        if not 0.0 <= float(keep_fraction) <= 1.0:
-            raise ValueError(f"loop.filter_keep must be in [0, 1] (0 turns the safeguard off), got {keep_fraction!r}")
+                 before_update: str = "g0"):
+        """The arguments are the loop's ``outcome_window``, ``filter_keep`` and ``filter_before_update``,
+        checked where they are declared (:class:`~.settings.LoopConfig`)."""
         self.critic = critic
         self.before_update = before_update
         self.keep_fraction = float(keep_fraction)
@@ -116,7 +101,10 @@ class CriticFilter:
         include every achieved sub-goal (``SubgoalCritic.filtered_set``), so that a route the agent
         has committed to (it holds the blue key) is the one Ĝt names. Either way joined with the
         safeguard's sub-goals. Before the critic's first update: G0 (None), or with ``before_update``
-        "completion" q's completion of the achieved sub-goals (``SubgoalCritic.completion``)."""
+        "completion" q's completion of the achieved sub-goals (``SubgoalCritic.completion``): q starts
+        at the prior, so the human's edges then steer the high level from the first episode (holding a
+        key, Ĝt is its door and the goal; holding nothing, the completion is empty and the high level
+        reads G0)."""
         if self._mask is None:
             if self.before_update == "g0":
                 return None
@@ -125,7 +113,7 @@ class CriticFilter:
         if achieved is None:
             return self._mask | self._keep
         given = torch.as_tensor(np.asarray(achieved, dtype=bool))
-        return self.critic.filtered_set(given=given, fallback=self.fallback).cpu().numpy().astype(bool) | self._keep
+        return self.critic.filtered_set(given=given).cpu().numpy().astype(bool) | self._keep
 
     def end_episode(self, visited: np.ndarray, success: bool) -> None:
         if not success:
@@ -151,7 +139,7 @@ class CriticFilter:
     def update(self, batch: HighLevelBatch) -> dict[str, float]:
         """One critic update on the minibatch. The TDBatch itself goes to the critic, not its
         ``residuals`` method, so that its ``weight`` scales the TD likelihood: a pool of K minibatches
-        counts as their mean or their sum (``loop.critic_pool_weight``). An outcome likelihood gets the
+        counts as their mean. An outcome likelihood gets the
         recent successes attached, which count once whatever the pool; before the first success it has
         no evidence, and no update runs (Ĝt = G0)."""
         if self._needs_outcomes:

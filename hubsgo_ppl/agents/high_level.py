@@ -22,57 +22,18 @@ purpose:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Any, Callable, Sequence
+from functools import partial
+from typing import Any, Callable
 
 import numpy as np
 import torch
-from stable_baselines3.common.utils import polyak_update
-from torch import nn
 
-from ..infer.critic import TDBatch
+from ..infer.tdbatch import TDBatch
 from .buffers import ReplayBuffer
-from .nets import mlp
+from .nets import TargetNetwork, mlp
+from .settings import HighLevelConfig
 
-__all__ = ["HighLevelConfig", "HighLevelBatch", "HighLevelDQN", "linked_rows", "masked_max"]
-
-
-@dataclass
-class HighLevelConfig:
-    hidden: tuple[int, ...] = (128, 128)
-    lr: float = 1e-3
-    gamma: float = 0.99            # per primitive step; an option of k steps discounts by γ^k (SMDP)
-    batch_size: int = 64
-    buffer_size: int = 20_000
-    learning_starts: int = 64      # high-level transitions before updates start
-    target_tau: float = 0.02       # Polyak rate of the target network
-    double_q: bool = True
-    grad_clip: float = 10.0
-    # true, where the env offers subgoal_features (egocentric mazes): one network reads each sub-goal's
-    # row, extended by whether a sub-goal the spec joins to it by a positive edge, and by a negative
-    # one, is achieved, and gives Q(s, g); nothing in a row names g (h-DQN has no spec: both columns
-    # stay 0). false: one output per sub-goal
-    goal_features: bool = False
-
-
-def linked_rows(features: Callable, n_goals: int, edges: Sequence[tuple[int, int, int]] = ()) -> Callable:
-    """``features`` (the env's per-sub-goal rows, obs -> (..., N, F)) with two columns more per row:
-    whether a sub-goal joined to it by a positive edge is achieved, and whether one joined by a negative
-    edge is. The achievement flags are the rows' own (column ``features.flag``)."""
-    pos = torch.zeros(n_goals, n_goals)
-    neg = torch.zeros(n_goals, n_goals)
-    for u, v, sign in edges:
-        if sign:
-            links = pos if sign > 0 else neg
-            links[u, v] = links[v, u] = 1.0
-
-    def feat(obs: torch.Tensor) -> torch.Tensor:
-        rows = features(obs)
-        done = rows[..., features.flag].unsqueeze(-2)                  # (..., 1, N)
-        return torch.cat([rows, (done * pos).amax(-1, keepdim=True), (done * neg).amax(-1, keepdim=True)], -1)
-
-    feat.dim = int(features.dim) + 2
-    return feat
+__all__ = ["HighLevelConfig", "HighLevelBatch", "HighLevelDQN", "masked_max"]
 
 
 def masked_max(values: torch.Tensor, mask: torch.Tensor, empty: float = 0.0) -> torch.Tensor:
@@ -93,37 +54,22 @@ class HighLevelDQN:
     """Q(s, g) learner with ε-greedy selection restricted to an allowed set."""
 
     def __init__(self, obs_dim: int, n_goals: int, config: HighLevelConfig,
-                 generator: torch.Generator, rng: np.random.Generator, features: Callable | None = None):
+                 generator: torch.Generator, rng: np.random.Generator):
         self.cfg = config
         self.n_goals = n_goals
         self.rng = rng
-        # features(obs) -> (..., N, F): per-sub-goal rows (linked_rows), read by one shared network
-        if config.goal_features and features is None:
-            raise ValueError("high.goal_features=true needs the env's subgoal_features (egocentric mazes); "
-                             "set env.obs_mode=egocentric or high.goal_features=false")
-        self.features = features if config.goal_features else None
-        if self.features is not None:
-            self.q = mlp(self.features.dim, config.hidden, 1, generator)
-            self.q_target = mlp(self.features.dim, config.hidden, 1, generator)
-        else:
-            self.q = mlp(obs_dim, config.hidden, n_goals, generator)
-            self.q_target = mlp(obs_dim, config.hidden, n_goals, generator)
-        self.q_target.load_state_dict(self.q.state_dict())
-        self.opt = torch.optim.Adam(self.q.parameters(), lr=config.lr)
+        self.net = TargetNetwork(partial(mlp, obs_dim, config.hidden, n_goals, generator), config.lr,
+                                 config.target_tau, config.grad_clip)
+        self.q, self.q_target, self.opt = self.net.online, self.net.target, self.net.opt
         self.buffer = ReplayBuffer(config.buffer_size, rng, dtypes={"goal": np.int64, "available": bool},
                                    obs=(obs_dim,), goal=(), reward=(), next_obs=(obs_dim,),
                                    discount=(), available=(n_goals,))
         self.updates = 0
 
-    def _q(self, net: nn.Module, obs: torch.Tensor) -> torch.Tensor:
-        """(..., N) values of every sub-goal."""
-        if self.features is not None:
-            return net(self.features(obs)).squeeze(-1)
-        return net(obs)
-
     @torch.no_grad()
     def q_values(self, obs: np.ndarray) -> np.ndarray:
-        return self._q(self.q, torch.as_tensor(obs, dtype=torch.float32)).numpy()
+        """(..., N) values of every sub-goal."""
+        return self.q(torch.as_tensor(obs, dtype=torch.float32)).numpy()
 
     def select(self, obs: np.ndarray, allowed: np.ndarray, explore_eps: float) -> int:
         """ε-greedy over ``allowed`` (Sec. 3.4: g_t = argmax_{g' ∈ Ĝt | G0} Q(s_t, g'))."""
@@ -153,11 +99,11 @@ class HighLevelDQN:
         if callable(target_mask):
             target_mask = target_mask(~avail)
         with torch.no_grad():
-            q_next_t = self._q(self.q_target, b["next_obs"])
+            q_next_t = self.q_target(b["next_obs"])
             mask = avail if target_mask is None else avail & torch.as_tensor(target_mask).bool()
             mask = torch.where(mask.any(-1, keepdim=True), mask, avail)   # empty Ĝt ∩ avail: fall back to G0
             if self.cfg.double_q:
-                q_next_online = self._q(self.q, b["next_obs"])
+                q_next_online = self.q(b["next_obs"])
                 neg = torch.finfo(q_next_online.dtype).min
                 a_star = torch.where(mask, q_next_online, torch.full_like(q_next_online, neg)).argmax(-1)
                 boot = q_next_t.gather(1, a_star[:, None]).squeeze(1)
@@ -165,28 +111,18 @@ class HighLevelDQN:
             else:
                 boot = masked_max(q_next_t, mask)
             y = b["reward"] + b["discount"] * boot
-        q_taken = self._q(self.q, b["obs"]).gather(1, b["goal"][:, None]).squeeze(1)
+        q_taken = self.q(b["obs"]).gather(1, b["goal"][:, None]).squeeze(1)
         loss = 0.5 * (y - q_taken).pow(2).mean()            # Eq. 2
-        self.opt.zero_grad()
-        loss.backward()
-        nn.utils.clip_grad_norm_(self.q.parameters(), self.cfg.grad_clip)
-        self.opt.step()
-        self._soft_update()
+        self.net.step(loss)
         self.updates += 1
         batch = HighLevelBatch(q_taken=q_taken.detach(), q_next=q_next_t, reward=b["reward"],
                                discount=b["discount"], available=avail)
         return {"high/td_loss": loss.item()}, batch
 
-    def _soft_update(self) -> None:
-        polyak_update(self.q.parameters(), self.q_target.parameters(), self.cfg.target_tau)
-
     def state_dict(self) -> dict[str, Any]:
-        return {"q": self.q.state_dict(), "q_target": self.q_target.state_dict(),
-                "opt": self.opt.state_dict(), "buffer": self.buffer.state_dict(), "updates": self.updates}
+        return {**self.net.state_dict(), "buffer": self.buffer.state_dict(), "updates": self.updates}
 
     def load_state_dict(self, s: dict[str, Any]) -> None:
-        self.q.load_state_dict(s["q"])
-        self.q_target.load_state_dict(s["q_target"])
-        self.opt.load_state_dict(s["opt"])
+        self.net.load_state_dict(s)
         self.buffer.load_state_dict(s["buffer"])
         self.updates = int(s["updates"])

@@ -21,53 +21,23 @@ A baseline of the paper's Sec. 4.2 that learns its own sub-goals instead of choo
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from functools import partial
 from typing import Any, Callable
 
 import gymnasium as gym
 import numpy as np
 import torch
-from stable_baselines3.common.utils import polyak_update
 from torch.nn import functional as F
 
 from .buffers import ReplayBuffer
-from .config import make_config
 from .episode import EpisodeStats, EpisodeTally, reset_episode
-from .nets import mlp
+from .nets import TargetNetwork, mlp
 from .seeding import HIRO_STREAM, seed_sequence
+from .settings import HIROConfig, validate
 from .td3 import TD3Core, TD3Step
 
 __all__ = ["HIROConfig", "GoalSpace", "goal_space_for", "goal_sequence", "candidate_goals",
            "off_policy_correction", "TD3Core", "GoalDQNLow", "GoalTD3Low", "HIRO", "build_hiro"]
-
-
-@dataclass
-class HIROConfig:
-    total_steps: int = 100_000
-    c: int = 10                         # env steps per high-level goal
-    gamma_high: float = 0.99            # per high-level step
-    gamma_low: float = 0.95
-    hidden: tuple[int, ...] = (128, 128)
-    lr: float = 3e-4
-    batch_size: int = 64
-    tau: float = 0.005
-    high_buffer: int = 5_000
-    low_buffer: int = 50_000
-    high_learning_starts: int = 32      # high-level transitions before the high level learns
-    low_learning_starts: int = 500      # low-level transitions before the low level learns
-    high_noise: float = 0.2             # exploration noise on goals (fraction of scale)
-    low_noise: float = 0.1              # TD3 low level: exploration noise (fraction of action range)
-    temperature: float = 0.3            # DQN low level: Boltzmann temperature τ
-    candidates: int = 8                 # Gaussian relabelling candidates
-    candidate_sigma: float = 0.5        # their std (fraction of scale), as in Nachum et al.
-    goal_scale: float | None = None     # None: the task family's default
-    policy_noise: float = 0.2           # TD3 target smoothing
-    noise_clip: float = 0.5
-    policy_delay: int = 2
-
-    def __post_init__(self) -> None:
-        if self.c <= 0 or self.batch_size <= 0 or self.temperature <= 0:
-            raise ValueError("hiro.c, hiro.batch_size and hiro.temperature must be positive")
 
 
 # -- goal space ---------------------------------------------------------------------------------------
@@ -196,10 +166,8 @@ class GoalDQNLow:
     def __init__(self, obs_dim: int, goal_scale: np.ndarray, n_actions: int, cfg: HIROConfig, gen: torch.Generator):
         self.cfg, self.n_actions = cfg, n_actions
         self.scale = torch.as_tensor(goal_scale, dtype=torch.float32)
-        self.q = mlp(obs_dim + len(goal_scale), cfg.hidden, n_actions, gen)
-        self.q_t = mlp(obs_dim + len(goal_scale), cfg.hidden, n_actions, gen)
-        self.q_t.load_state_dict(self.q.state_dict())
-        self.opt = torch.optim.Adam(self.q.parameters(), lr=cfg.lr)
+        self.net = TargetNetwork(partial(mlp, obs_dim + len(goal_scale), cfg.hidden, n_actions, gen), cfg.lr, cfg.tau)
+        self.q, self.q_t = self.net.online, self.net.target
 
     def _in(self, obs: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
         return torch.cat([obs, goal / self.scale], -1)
@@ -223,19 +191,14 @@ class GoalDQNLow:
             y = b["reward"] + self.cfg.gamma_low * (1 - b["done"]) * self.q_t(nxt).gather(-1, a2).squeeze(-1)
         q = self.q(self._in(b["obs"], b["goal"])).gather(-1, b["action"].long().unsqueeze(-1)).squeeze(-1)
         loss = F.smooth_l1_loss(q, y)
-        self.opt.zero_grad()
-        loss.backward()
-        self.opt.step()
-        polyak_update(self.q.parameters(), self.q_t.parameters(), self.cfg.tau)
+        self.net.step(loss)
         return {"td_loss": loss.item()}
 
     def state_dict(self) -> dict[str, Any]:
-        return {"q": self.q.state_dict(), "q_t": self.q_t.state_dict(), "opt": self.opt.state_dict()}
+        return self.net.state_dict(target="q_t")
 
     def load_state_dict(self, s: dict[str, Any]) -> None:
-        self.q.load_state_dict(s["q"])
-        self.q_t.load_state_dict(s["q_t"])
-        self.opt.load_state_dict(s["opt"])
+        self.net.load_state_dict(s, target="q_t")
 
 
 class GoalTD3Low:
@@ -411,4 +374,4 @@ class HIRO:
 
 def build_hiro(env: gym.Env, cfg: dict[str, Any], seed: int, critic: Any = None) -> HIRO:
     """Builder named in ``agents.factory.BUILDERS``; settings from the preset's ``hiro`` section."""
-    return HIRO(env, make_config("hiro", HIROConfig, cfg.get("hiro", {}), total_steps=int(cfg["steps"])), seed)
+    return HIRO(env, validate("hiro", HIROConfig, dict(cfg.get("hiro", {})), derived={"total_steps": int(cfg["steps"])}), seed)

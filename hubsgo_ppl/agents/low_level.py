@@ -8,39 +8,19 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 import torch
-from stable_baselines3.common.utils import polyak_update
-from torch import nn
 
 from .buffers import ReplayBuffer
-from .nets import mlp
+from .nets import TargetNetwork, mlp
 from .protocols import Controller, LowLevel, LowLevelBase
+from .settings import GoalDQNConfig
 
 __all__ = ["LowLevel", "LowLevelBase", "GoalDQNConfig", "GoalDQN", "ScriptedLowLevel"]
-
-
-@dataclass
-class GoalDQNConfig:
-    hidden: tuple[int, ...] = (256, 256)
-    lr: float = 5e-4
-    gamma: float = 0.95
-    batch_size: int = 128
-    buffer_size: int = 100_000
-    learning_starts: int = 1_000
-    train_every: int = 2           # env steps per gradient step
-    target_tau: float = 0.01
-    grad_clip: float = 10.0
-    # potential-based shaping of the intrinsic reward, r + shaping * (gamma * phi(s') - phi(s)), with the
-    # env's subgoal_potential (Ng et al. 1999: optimal policies unchanged); 0 turns it off
-    shaping: float = 0.0
-    # true, where the env offers subgoal_features (egocentric mazes): one network reads each sub-goal's
-    # row (its offset and kind, nothing naming it) and gives Q(s, g, ·); false: one output head per sub-goal
-    goal_features: bool = False
 
 
 class GoalDQN(LowLevelBase):
@@ -49,7 +29,7 @@ class GoalDQN(LowLevelBase):
     learns = True
 
     def __init__(self, obs_dim: int, n_goals: int, n_actions: int, config: GoalDQNConfig,
-                 generator: torch.Generator, rng: np.random.Generator, potential=None, features=None):
+                 generator: torch.Generator, rng: np.random.Generator, potential=None):
         self.cfg = config
         if config.shaping and potential is None:
             raise ValueError("low.shaping > 0 needs the env's subgoal_potential (symbolic observations); "
@@ -57,19 +37,9 @@ class GoalDQN(LowLevelBase):
         self.potential = potential if config.shaping else None
         self.n_goals, self.n_actions = n_goals, n_actions
         self.rng = rng
-        # features(obs) -> (..., N, F): the env's per-sub-goal rows, read by one shared network
-        if config.goal_features and features is None:
-            raise ValueError("low.goal_features=true needs the env's subgoal_features (egocentric mazes); "
-                             "set env.obs_mode=egocentric or low.goal_features=false")
-        self.features = features if config.goal_features else None
-        if self.features is not None:
-            self.q = mlp(self.features.dim, config.hidden, n_actions, generator)
-            self.q_target = mlp(self.features.dim, config.hidden, n_actions, generator)
-        else:
-            self.q = mlp(obs_dim, config.hidden, n_goals * n_actions, generator)
-            self.q_target = mlp(obs_dim, config.hidden, n_goals * n_actions, generator)
-        self.q_target.load_state_dict(self.q.state_dict())
-        self.opt = torch.optim.Adam(self.q.parameters(), lr=config.lr)
+        self.net = TargetNetwork(partial(mlp, obs_dim, config.hidden, n_goals * n_actions, generator), config.lr,
+                                 config.target_tau, config.grad_clip)
+        self.q, self.q_target, self.opt = self.net.online, self.net.target, self.net.opt
         self.buffer = ReplayBuffer(config.buffer_size, rng,
                                    dtypes={"action": np.int64, "before": bool, "after": bool,
                                            "terminated": bool},
@@ -80,9 +50,8 @@ class GoalDQN(LowLevelBase):
         # (N,) weights of the sub-goals in the TD loss (None: all alike); loop.low_goal_weight sets them
         self.goal_weight: torch.Tensor | None = None
 
-    def _q(self, net: nn.Module, obs: torch.Tensor) -> torch.Tensor:
-        if self.features is not None:
-            return net(self.features(obs))
+    def _q(self, net: torch.nn.Module, obs: torch.Tensor) -> torch.Tensor:
+        """(..., N, A) values of every action towards every sub-goal."""
         return net(obs).view(*obs.shape[:-1], self.n_goals, self.n_actions)
 
     def act(self, obs: np.ndarray, goal: int, explore_eps: float, env: gym.Env | None = None) -> int:
@@ -92,8 +61,7 @@ class GoalDQN(LowLevelBase):
             return int(self.rng.integers(self.n_actions))
         with torch.no_grad():
             obs_t = torch.as_tensor(obs, dtype=torch.float32)
-            q = (self.q(self.features(obs_t)[goal]) if self.features is not None     # goal's row only
-                 else self._q(self.q, obs_t)[goal])
+            q = self._q(self.q, obs_t)[goal]
         return int(q.argmax())
 
     def observe(self, obs, action, next_obs, before, after, terminated) -> dict[str, float] | None:
@@ -121,22 +89,15 @@ class GoalDQN(LowLevelBase):
         if self.goal_weight is not None:
             weight = weight * self.goal_weight
         loss = (weight * (q_a - y).pow(2)).sum() / weight.sum().clamp_min(1.0)
-        self.opt.zero_grad()
-        loss.backward()
-        nn.utils.clip_grad_norm_(self.q.parameters(), self.cfg.grad_clip)
-        self.opt.step()
-        polyak_update(self.q.parameters(), self.q_target.parameters(), self.cfg.target_tau)
+        self.net.step(loss)
         return {"low/td_loss": loss.item()}
 
     def state_dict(self) -> dict[str, Any]:
-        return {"q": self.q.state_dict(), "q_target": self.q_target.state_dict(),
-                "opt": self.opt.state_dict(), "buffer": self.buffer.state_dict(), "steps": self.steps,
+        return {**self.net.state_dict(), "buffer": self.buffer.state_dict(), "steps": self.steps,
                 "goal_weight": self.goal_weight}
 
     def load_state_dict(self, s: dict[str, Any]) -> None:
-        self.q.load_state_dict(s["q"])
-        self.q_target.load_state_dict(s["q_target"])
-        self.opt.load_state_dict(s["opt"])
+        self.net.load_state_dict(s)
         self.buffer.load_state_dict(s["buffer"])
         self.steps = int(s["steps"])
         self.goal_weight = s.get("goal_weight")

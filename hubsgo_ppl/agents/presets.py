@@ -1,4 +1,5 @@
-"""Default hyperparameters per task family, overridable from the CLI (``--set loop.option_steps=30``).
+"""Default settings per task family (:data:`FAMILIES`, typed), overridable from the CLI
+(``--set loop.option_steps=30``).
 
 :func:`hubsgo_ppl.agents.config.resolve_hyper` merges them with a task's own settings and the
 overrides, and validates the result against the runtime settings classes."""
@@ -6,57 +7,61 @@ overrides, and validates the result against the runtime settings classes."""
 from __future__ import annotations
 
 import copy
+from dataclasses import dataclass, field
 from typing import Any
 
-__all__ = ["PRESETS", "TASK_PRESETS", "preset", "apply_overrides"]
+from .settings import GoalDQNConfig, HighLevelConfig, HIROConfig, LoopConfig, ScriptedOSCConfig, Settings
 
-PRESETS: dict[str, dict[str, Any]] = {
-    "minigrid": {
-        # One default for every maze, shipped or written by a user (docs/results.md, "Critic evidence
-        # and defaults"); nothing maze-specific lives here.
-        "steps": 40_000,
-        "low_level": "learned",
-        "env": {},                      # keyword arguments of the env, e.g. max_steps
-        # the high level reads Ĝt given what the agent holds and has opened, once per episode until
-        # that changes; before the critic's first update Ĝt is the prior's completion of what was
-        # achieved; the critic is updated on every 4th high-level minibatch (the pool at weight 1/4);
-        # after each update from evidence the learned low level's TD loss weighs each sub-goal by its
-        # marginal, at least 1 - filter_end (h-DQN, without a critic: all alike)
-        "loop": {"option_steps": 10, "explore_fraction": 0.3, "low_explore_fraction": 0.3,
-                 "filter_start": 0.5, "filter_end": 0.9, "filter_fraction": 0.3,
-                 "filter_given_achieved": True, "filter_refresh": "episode", "filter_before_update": "completion",
-                 "critic_every": 4, "low_goal_weight": "marginal"},
-        "high": {"hidden": [128, 128], "lr": 1e-3, "batch_size": 64},
-        # potential-based shaping towards each sub-goal's cell (optimal policies unchanged)
-        "low": {"hidden": [128, 128], "lr": 5e-4, "batch_size": 128, "learning_starts": 1000, "shaping": 1.0},
-        # flat baselines (Stable-Baselines3 keyword arguments; agents/flat.py). dqn and ddqn share "dqn".
-        "dqn": {"learning_rate": 5e-4, "buffer_size": 100_000, "learning_starts": 1000, "batch_size": 64,
-                "train_freq": 4, "target_update_interval": 1000, "exploration_fraction": 0.3,
-                "exploration_final_eps": 0.05, "gamma": 0.99, "policy_kwargs": {"net_arch": [256, 256]}},
-        "ppo": {"learning_rate": 3e-4, "n_steps": 1024, "batch_size": 64, "n_epochs": 4, "gamma": 0.99,
-                "ent_coef": 0.01, "policy_kwargs": {"net_arch": [128, 128]}},
-        # HIRO (agents/hiro.py, HIROConfig); goals are (dx, dy) cell offsets
-        "hiro": {"c": 10, "hidden": [128, 128], "lr": 3e-4, "batch_size": 64, "low_learning_starts": 1000,
-                 "temperature": 0.3, "high_noise": 0.3},
-    },
-    "robosuite": {
-        "steps": 20_000,                # StackCubes needs ~20k; PushAnyOne 8k, CollectThreeBalls 12k suffice
-        "low_level": "scripted",
-        "env": {},                      # e.g. {horizon: 300}; the catalogue's options are the defaults
-        # 60 steps fit any single scripted sub-goal (measured <= 45 for grasp/place, pushes continue over
-        # two options); shorter options give the high level more decisions per env step
-        "loop": {"option_steps": 60, "explore_fraction": 0.3, "filter_fraction": 0.3,
-                 # the scripted controller ignores these; they scale GoalTD3's exploration noise
-                 "low_explore_start": 1.0, "low_explore_end": 0.3, "low_explore_fraction": 0.5},
-        "high": {"hidden": [128, 128], "lr": 1e-3, "batch_size": 32, "learning_starts": 32},
-        "low": {},                      # ScriptedOSC (scripted) or GoalTD3Config (learned) fields
-        "td3": {"learning_rate": 1e-3, "buffer_size": 100_000, "learning_starts": 1000, "batch_size": 256,
-                "train_freq": 1, "gamma": 0.99, "noise_sigma": 0.1, "policy_kwargs": {"net_arch": [256, 256]}},
-        # goals are end-effector offsets (m) within +-goal_scale
-        "hiro": {"c": 10, "hidden": [256, 256], "lr": 3e-4, "batch_size": 128, "low_learning_starts": 1000,
-                 "goal_scale": 0.3, "low_noise": 0.1},
-    },
+__all__ = ["FamilyDefaults", "FAMILIES", "PRESETS", "TASK_PRESETS", "preset", "apply_overrides"]
+
+
+@dataclass(frozen=True)
+class FamilyDefaults:
+    """A task family's defaults, typed: the run's own settings, the sections of the hierarchical agents
+    and HIRO (their settings models), and the flat baselines' Stable-Baselines3 arguments (checked by
+    :func:`~.settings.sb3_model` when a run is resolved)."""
+
+    steps: int
+    low_level: str                          # "learned" or "scripted"
+    loop: LoopConfig
+    high: HighLevelConfig
+    low: Settings                           # the settings of the family's default low level
+    hiro: HIROConfig
+    sb3: dict[str, dict[str, Any]] = field(default_factory=dict)    # section -> SB3 keyword arguments
+    env: dict[str, Any] = field(default_factory=dict)                # keyword arguments of the env
+
+    def as_dict(self) -> dict[str, Any]:
+        """The dict a run's settings start from: each section holds the keys the family sets."""
+        def keys(model: Settings) -> dict[str, Any]:
+            return model.model_dump(mode="json", exclude_unset=True)
+
+        return {"steps": self.steps, "low_level": self.low_level, "env": copy.deepcopy(self.env),
+                "loop": keys(self.loop), "high": keys(self.high), "low": keys(self.low),
+                **copy.deepcopy(self.sb3), "hiro": keys(self.hiro)}
+
+
+FAMILIES: dict[str, FamilyDefaults] = {
+    # One default for every maze, shipped or written by a user (docs/results.md, "Critic evidence and
+    # defaults"); nothing maze-specific lives here.
+    "minigrid": FamilyDefaults(
+        steps=40_000, low_level="learned", loop=LoopConfig.minigrid(), high=HighLevelConfig.minigrid(),
+        low=GoalDQNConfig.minigrid(), hiro=HIROConfig.minigrid(),
+        # flat baselines (agents/flat.py); dqn and ddqn share "dqn"
+        sb3={"dqn": {"learning_rate": 5e-4, "buffer_size": 100_000, "learning_starts": 1000, "batch_size": 64,
+                     "train_freq": 4, "target_update_interval": 1000, "exploration_fraction": 0.3,
+                     "exploration_final_eps": 0.05, "gamma": 0.99, "policy_kwargs": {"net_arch": [256, 256]}},
+             "ppo": {"learning_rate": 3e-4, "n_steps": 1024, "batch_size": 64, "n_epochs": 4, "gamma": 0.99,
+                     "ent_coef": 0.01, "policy_kwargs": {"net_arch": [128, 128]}}}),
+    # StackCubes needs ~20k steps; PushAnyOne 8k, CollectThreeBalls 12k suffice (TASK_PRESETS)
+    "robosuite": FamilyDefaults(
+        steps=20_000, low_level="scripted", loop=LoopConfig.robosuite(), high=HighLevelConfig.robosuite(),
+        low=ScriptedOSCConfig(), hiro=HIROConfig.robosuite(),
+        sb3={"td3": {"learning_rate": 1e-3, "buffer_size": 100_000, "learning_starts": 1000, "batch_size": 256,
+                     "train_freq": 1, "gamma": 0.99, "noise_sigma": 0.1, "policy_kwargs": {"net_arch": [256, 256]}}}),
 }
+
+#: the families' defaults as dicts (a view of :data:`FAMILIES`)
+PRESETS: dict[str, dict[str, Any]] = {name: family.as_dict() for name, family in FAMILIES.items()}
 
 
 # Per-task settings merged over the family's: the arm tasks' horizons and budgets (docs/results.md).
@@ -78,7 +83,7 @@ def preset(family: str, task: str | None = None) -> dict[str, Any]:
     """The family's defaults, with the task's own settings (if any) merged over them."""
     if family not in PRESETS:
         raise KeyError(f"no hyperparameter preset for task family {family!r}")
-    return _merge(copy.deepcopy(PRESETS[family]), copy.deepcopy(TASK_PRESETS.get(task or "", {})))
+    return _merge(FAMILIES[family].as_dict(), copy.deepcopy(TASK_PRESETS.get(task or "", {})))
 
 
 def _coerce(text: str) -> Any:

@@ -29,8 +29,6 @@ class ScriptedMaze:
     """
 
     def __init__(self, max_states: int = 200_000):
-        if int(max_states) < 1:
-            raise ValueError(f"max_states must be a positive integer, got {max_states!r}")
         self.max_states = int(max_states)
         self.reset()
 

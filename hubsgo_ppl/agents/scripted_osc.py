@@ -25,10 +25,6 @@ class ScriptedOSC:
     """
 
     def __init__(self, gain: float = 20.0, tolerance: float = 0.002):
-        if not gain > 0:
-            raise ValueError(f"gain must be > 0 (action per metre), got {gain}")
-        if not tolerance >= 0:
-            raise ValueError(f"tolerance must be >= 0 metres, got {tolerance}")
         self.gain = float(gain)
         self.tolerance = float(tolerance)
 

@@ -24,7 +24,6 @@ trajectory) and written to the replay with their relabelled copies when the traj
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
@@ -34,57 +33,11 @@ from stable_baselines3.common.running_mean_std import RunningMeanStd
 from torch import nn
 
 from .buffers import ReplayBuffer
-from .config import make_config
 from .protocols import LowLevelBase
+from .settings import GoalTD3Config, validate
 from .td3 import TD3Core
 
 __all__ = ["GoalTD3Config", "GoalTD3", "ObsNormaliser", "her_future_relabel", "goal_reward"]
-
-
-@dataclass
-class GoalTD3Config:
-    """Hyperparameters of :class:`GoalTD3` (``low:`` section of the robosuite preset)."""
-
-    # defaults: the configuration benchmarks/reach_skill.py measured (docs/results_robosuite.md)
-    hidden: tuple[int, ...] = (128, 128)
-    actor_lr: float = 1e-3
-    critic_lr: float = 1e-3
-    gamma: float = 0.95              # per low-level step; HER's value for short-horizon reaching
-    tau: float = 0.05                # Polyak rate of the target networks (HER: 0.95 retention)
-    batch_size: int = 128
-    buffer_size: int = 200_000
-    learning_starts: int = 500       # stored transitions (relabelled included) before updates start
-    train_every: int = 1             # env steps per gradient step
-    gradient_steps: int = 1          # gradient steps each time training triggers
-    policy_delay: int = 2            # TD3: one actor update per this many critic updates
-    target_noise: float = 0.2        # TD3 target policy smoothing (fraction of the action range)
-    target_noise_clip: float = 0.5
-    noise_sigma: float = 0.2         # Gaussian exploration std at explore_eps = 1 (fraction of range)
-    random_eps: float = 0.3          # uniform random action with probability random_eps * explore_eps
-    action_l2: float = 0.1           # HER's penalty on the actor's (normalised) actions
-    her_k: int = 4                   # relabelled copies per transition ('future' strategy)
-    tolerance: float = 0.02          # metres: the target region's radius
-    gripper_tolerance: float = 0.5   # |applied - commanded| gripper within this counts as reached
-    goal_scale: float = 10.0         # relative goal (m) times this is the network input
-    use_obs: bool = False            # also feed the (normalised) observation, not only the goal
-    obs_clip: float = 5.0
-
-    def __post_init__(self) -> None:
-        checks = {"actor_lr": self.actor_lr > 0, "critic_lr": self.critic_lr > 0,
-                  "gamma": 0 <= self.gamma < 1, "tau": 0 < self.tau <= 1, "batch_size": self.batch_size > 0,
-                  "buffer_size": self.buffer_size > 0, "learning_starts": self.learning_starts >= 0,
-                  "train_every": self.train_every >= 1, "gradient_steps": self.gradient_steps >= 1,
-                  "policy_delay": self.policy_delay >= 1, "target_noise": self.target_noise >= 0,
-                  "target_noise_clip": self.target_noise_clip >= 0, "noise_sigma": self.noise_sigma >= 0,
-                  "random_eps": 0 <= self.random_eps <= 1, "action_l2": self.action_l2 >= 0,
-                  "her_k": self.her_k >= 0, "tolerance": self.tolerance > 0,
-                  "gripper_tolerance": self.gripper_tolerance > 0, "goal_scale": self.goal_scale > 0,
-                  "obs_clip": self.obs_clip > 0}
-        bad = [k for k, ok in checks.items() if not ok]
-        if bad:
-            raise ValueError("GoalTD3 setting(s) out of range: "
-                             + ", ".join(f"{k}={getattr(self, k)!r}" for k in bad)
-                             + " (rates and sizes must be positive, gamma in [0, 1), random_eps in [0, 1])")
 
 
 def goal_reward(achieved_pos: np.ndarray, achieved_grip: np.ndarray | None, goal_pos: np.ndarray,
@@ -223,7 +176,7 @@ class GoalTD3(LowLevelBase):
     def for_env(cls, env: gym.Env, low_cfg: dict[str, Any], gen: torch.Generator,
                 rng: np.random.Generator) -> "GoalTD3":
         """Build for a robosuite sub-goal task (``agents/factory.py``); ``low_cfg`` holds config fields."""
-        config = make_config("low", GoalTD3Config, low_cfg)
+        config = validate("low", GoalTD3Config, dict(low_cfg))
         if not isinstance(env.action_space, gym.spaces.Box):
             raise TypeError(f"GoalTD3 needs a continuous (Box) action space, got {env.action_space}; "
                             "grid tasks use GoalDQN")

@@ -22,17 +22,14 @@ same unordered pair of names):
   is), so a greedy high level starts it at the value of an average known sub-goal, neither preferred
   nor avoided. Dropped rows go.
 - low level (GoalDQN, one block of ``n_actions`` outputs per sub-goal): the same, block by block.
-  GoalTD3, the scripted controller and a GoalDQN over the sub-goals' features (``low.goal_features``)
-  have no per-sub-goal outputs and carry over whole.
+  GoalTD3 and the scripted controller have no per-sub-goal outputs and carry over whole.
 
 When a revision keeps the run (:func:`revise_agent_state`), the rest carries over too: the high
 level's Adam moments (rows remapped like the weights), its replay (transitions towards a dropped
 sub-goal removed, goal indices remapped, a new sub-goal unavailable at every stored s' since it was
 not tracked there), the low level's replay (a new sub-goal's flags set to "already achieved", which
 masks it out of the stored transitions' loss; its goal weights, ``loop.low_goal_weight``, restart
-with the critic's optimiser and carry over with it), the per-goal success rates (new: 0), the learned
-initiation sets (by name: a set that names a dropped sub-goal goes, a new sub-goal starts uncounted), the RNG
-streams, the counters and so the ε schedules. The filter's outcome window keeps its columns when sub-goals
+with the critic's optimiser and carry over with it), the RNG streams, the counters and so the ε schedules. The filter's outcome window keeps its columns when sub-goals
 are only dropped; when sub-goals are added it restarts, since the stored episodes do not say whether
 they achieved the new ones. The filter's current Ĝt keeps its persisting entries and includes the new
 sub-goals until the critic's next update. The critic minibatches waiting for a pooled update are
@@ -86,24 +83,6 @@ def _last_layer(state: dict[str, torch.Tensor]) -> tuple[str, str]:
     """The keys of the last Linear layer (weight, bias) of an ``nn.Sequential`` MLP's state dict."""
     last = max(int(k.split(".")[0]) for k in state if k.endswith(".weight"))
     return f"{last}.weight", f"{last}.bias"
-
-
-# the two forms of a learned grid level (GoalDQN, HighLevelDQN), as a refusal names them
-LEVEL_FORM = {True: "one network over the sub-goals' features", False: "one head per sub-goal"}
-
-
-def low_is_shared(state: dict[str, Any], n_actions: int) -> bool:
-    """Whether a GoalDQN state is one network over the sub-goals' features (one output per action)
-    rather than one output head per sub-goal."""
-    outputs = state["q"][_last_layer(state["q"])[1]].shape[0]
-    return outputs == int(n_actions) and state["buffer"]["data"]["before"].shape[1] > 1
-
-
-def high_is_shared(state: dict[str, Any]) -> bool:
-    """Whether a HighLevelDQN state is one network over the sub-goals' rows (one output) rather than
-    one output per sub-goal."""
-    outputs = state["q"][_last_layer(state["q"])[1]].shape[0]
-    return outputs == 1 and state["buffer"]["data"]["available"].shape[1] > 1
 
 
 def remap_net(old: dict[str, torch.Tensor], fresh: dict[str, torch.Tensor], index: Sequence[int | None],
@@ -224,36 +203,16 @@ def remap_critic_state(old: dict[str, Any], fresh_critic: Any, keep_run: bool = 
 # -- the high and the low level -----------------------------------------------------------------------
 
 
-def _whole_networks(old: dict[str, Any], fresh: dict[str, Any], what: str, rows: str,
-                    others: str) -> dict[str, Any]:
-    """A level with no per-sub-goal outputs (one network over the sub-goals' rows): its networks whole,
-    refused where the source reads rows of another size."""
-    out = {}
-    for key in ("q", "q_target"):
-        if any(old[key][k].shape != v.shape for k, v in fresh[key].items()):
-            raise TransferError(f"{what}: the source reads {rows} of another size; "
-                                f"leave out the {what} (--transfer {others})")
-        out[key] = copy.deepcopy(old[key])
-    return out
-
-
 def remap_high_state(old: dict[str, Any], fresh: dict[str, Any], fresh_params: Sequence[torch.Tensor],
                      index: Sequence[int | None], keep_run: bool = True) -> dict[str, Any]:
     """A :class:`~hubsgo_ppl.agents.high_level.HighLevelDQN` state for the new sub-goal set ``index``
     (module docstring). ``keep_run`` False: only the networks (a new run)."""
     out = dict(fresh)
-    shared = high_is_shared(fresh)
-    if high_is_shared(old) != shared:
-        raise TransferError(f"high level: the source has {LEVEL_FORM[not shared]}, this run {LEVEL_FORM[shared]}; "
-                            f"train both with the same high.goal_features")
-    if shared:
-        out.update(_whole_networks(old, fresh, "high level", "sub-goal rows", "critic,low"))
-    else:
-        out["q"] = remap_net(old["q"], fresh["q"], index, 1, "high level")
-        out["q_target"] = remap_net(old["q_target"], fresh["q_target"], index, 1, "high level (target)")
+    out["q"] = remap_net(old["q"], fresh["q"], index, 1, "high level")
+    out["q_target"] = remap_net(old["q_target"], fresh["q_target"], index, 1, "high level (target)")
     if not keep_run:
         return out
-    out["opt"] = copy.deepcopy(old["opt"]) if shared else _remap_adam(old["opt"], fresh_params, index, 1)
+    out["opt"] = _remap_adam(old["opt"], fresh_params, index, 1)
     out["updates"] = int(old["updates"])
     buf, new_buf = old["buffer"], copy.deepcopy(fresh["buffer"])
     goal_map = {i: j for j, i in enumerate(index) if i is not None}
@@ -299,22 +258,14 @@ def remap_low_state(old: dict[str, Any], fresh: dict[str, Any], low: Any, index:
     block = int(low.n_actions)
     n_old = old["buffer"]["data"]["before"].shape[1]
     outputs = old["q"][_last_layer(old["q"])[1]].shape[0]
-    shared = getattr(low, "features", None) is not None      # one network for every sub-goal
-    if (outputs != block) if shared else low_is_shared(old, block):
-        raise TransferError(f"low level: the source has {LEVEL_FORM[not shared]}, this run {LEVEL_FORM[shared]}; "
-                            f"train both with the same low.goal_features")
-    if not shared and outputs != n_old * block:
+    if outputs != n_old * block:
         raise TransferError(f"low level: the source acts with {outputs // max(n_old, 1)} actions, this task with {block}")
     out = dict(fresh)
-    if shared:
-        out.update(_whole_networks(old, fresh, "low level", "sub-goal features", "critic,high"))
-    else:
-        out["q"] = remap_net(old["q"], fresh["q"], index, block, "low level")
-        out["q_target"] = remap_net(old["q_target"], fresh["q_target"], index, block, "low level (target)")
+    out["q"] = remap_net(old["q"], fresh["q"], index, block, "low level")
+    out["q_target"] = remap_net(old["q_target"], fresh["q_target"], index, block, "low level (target)")
     if not keep_run:
         return out
-    out["opt"] = (copy.deepcopy(old["opt"]) if shared
-                  else _remap_adam(old["opt"], list(low.q.parameters()), index, block))
+    out["opt"] = _remap_adam(old["opt"], list(low.q.parameters()), index, block)
     out["steps"] = int(old["steps"])
     buf = copy.deepcopy(old["buffer"])
     for k in ("before", "after"):           # a sub-goal not tracked then counts as achieved: masked out
@@ -356,8 +307,6 @@ def revise_agent_state(old: dict[str, Any], agent: Any,
     else:
         outcomes = torch.as_tensor(_remap_columns(np.asarray(outcomes.numpy(), dtype=np.float32), index, False))
     state["filter"] = {"critic": critic, "mask": mask, "outcomes": outcomes}
-    rate = np.asarray(old.get("success_rate", np.zeros(len(old_names))), dtype=float)
-    state["success_rate"] = np.array([rate[i] if i is not None else 0.0 for i in index])
     if not same:
         state["pending"] = []
     info = {**info, "high_outputs_kept": sum(i is not None for i in index), "high_outputs": len(index),

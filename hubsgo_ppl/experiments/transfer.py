@@ -11,10 +11,7 @@ Two commands use it:
   along (:data:`SCHEDULES`, :func:`continued_schedules`): the high level's ε, the low level's ε and,
   with the critic, the probability of choosing from Ĝt start where the source run left them, so that a
   policy trained once is not made to act at random again; ``--restart-schedules`` starts them afresh.
-  A transferred critic also changes one loop default (:data:`TRANSFER_DEFAULTS`,
-  :func:`transfer_defaults`): where no critic sample holds every sub-goal the agent has achieved, Ĝt
-  is q's completion of what it holds rather than the unconditional mode. A transferred high level
-  brings the initiation sets its source run learned (``loop.initiation_tries``), counts and setting.
+  Every other loop setting is the run's own, as for a run from scratch.
 
 The remapping rules are in :mod:`.remap`. A transfer (``--init-from``) takes only the networks and the critic's factors; its Ĝt is the
 transferred critic's from the first episode on (not only after the first critic update, which with
@@ -30,18 +27,15 @@ from typing import Any, Sequence
 
 import torch
 
-from ..agents.high_level import HighLevelConfig
-from ..agents.low_level import GoalDQNConfig
 from ..envs import get_task
 from ..envs.subset import make_subset
 from .io import CheckpointError, load_checkpoint
-from .remap import (LEVEL_FORM, TransferError, high_is_shared, low_is_shared, name_index, remap_critic_state,  # noqa: F401
-                    remap_high_state, remap_low_state, remap_rows, revise_agent_state)
+from .remap import (TransferError, name_index, remap_critic_state, remap_high_state, remap_low_state,  # noqa: F401
+                    remap_rows, revise_agent_state)
 
-__all__ = ["PARTS", "SCHEDULES", "TRANSFER_DEFAULTS", "TransferError", "TransferPlan", "name_index", "remap_rows", "remap_critic_state",
+__all__ = ["PARTS", "SCHEDULES", "TransferError", "TransferPlan", "name_index", "remap_rows", "remap_critic_state",
            "remap_high_state", "remap_low_state", "revise_agent_state", "plan_transfer", "apply_transfer",
-           "continued_schedules", "transfer_defaults",
-           "config_subgoals"]
+           "continued_schedules", "transfer_defaults", "config_subgoals"]
 
 #: the parts of an agent ``--transfer`` names
 PARTS = ("critic", "high", "low")
@@ -49,13 +43,6 @@ PARTS = ("critic", "high", "low")
 SCHEDULES = {"critic": ("filter_start", "filter_end", "filter_fraction"),
              "high": ("explore_start", "explore_end", "explore_fraction"),
              "low": ("low_explore_start", "low_explore_end", "low_explore_fraction")}
-#: the loop settings a transferred part changes from the loop's defaults. A transferred critic is
-#: confident of its source run's route from the first episode, before the agent has learned the new
-#: layout, so an agent that picks up the other route's key is common; the unconditional mode
-#: (``filter_fallback: mode``) then names a route it can no longer take and the episode times out,
-#: while q's completion of what it holds names the route it is on (docs/results.md, "Transfer to a
-#: similar task"). From scratch the critic's confidence grows with the agent's, and the two tie.
-TRANSFER_DEFAULTS = {"critic": {"filter_fallback": "completion"}}
 _HIERARCHICAL = ("hubsgo", "hdqn")
 #: MiniGrid observation modes whose entries name absolute cells, so that they transfer only between
 #: grids of one size
@@ -173,17 +160,6 @@ def plan_transfer(resolved: dict[str, Any], source: str | Path,
         if "low" in chosen and src_n != dst_n:
             raise TransferError(f"--init-from {src_dir}: action counts differ: {src['task']} has {src_n} actions, "
                                 f"{resolved['task']} {dst_n}; leave out the low level (--transfer critic,high)")
-        for part, default, is_shared in (("high", HighLevelConfig.goal_features, high_is_shared),
-                                         ("low", GoalDQNConfig.goal_features, lambda s: low_is_shared(s, src_n))):
-            state = ckpt["agent"].get(part) if part in chosen else None
-            if not (isinstance(state, dict) and "q" in state and "buffer" in state):    # not a grid DQN
-                continue
-            src_shared = is_shared(state)
-            dst_shared = dst_mode == "egocentric" and bool(resolved["hyper"].get(part, {}).get("goal_features", default))
-            if src_shared != dst_shared:
-                raise TransferError(f"--init-from {src_dir}: the {part} level of the source run has {LEVEL_FORM[src_shared]}, "
-                                    f"this run {LEVEL_FORM[dst_shared]}; set --set {part}.goal_features="
-                                    f"{str(src_shared).lower()} or leave out --transfer {part}")
         for part in ("high", "low"):
             a = list(src["hyper"].get(part, {}).get("hidden", []))
             b = list(resolved["hyper"].get(part, {}).get("hidden", []))
@@ -216,14 +192,9 @@ def continued_schedules(plan: TransferPlan, keep: Sequence[str] = ()) -> dict[st
 
 
 def transfer_defaults(plan: TransferPlan, keep: Sequence[str] = ()) -> dict[str, Any]:
-    """``{loop key: value}``: :data:`TRANSFER_DEFAULTS` of the transferred parts and, with the high level,
-    the source run's learned initiation sets in use (``loop.initiation_tries``, when the source learned
-    them: its counts come along), less the keys in ``keep`` (those the user set)."""
-    out = {k: v for part in plan.parts for k, v in TRANSFER_DEFAULTS.get(part, {}).items()}
-    tries = int(plan.config["hyper"].get("loop", {}).get("initiation_tries", 0) or 0)
-    if "high" in plan.parts and tries > 0:
-        out["initiation_tries"] = tries
-    return {k: v for k, v in out.items() if k not in keep}
+    """``{loop key: value}`` a transfer changes besides the schedules: none (a transferred run uses the
+    loop's defaults); kept so that a run records what its transfer set."""
+    return {}
 
 
 def apply_transfer(agent: Any, plan: TransferPlan) -> dict[str, Any]:
@@ -245,9 +216,6 @@ def apply_transfer(agent: Any, plan: TransferPlan) -> dict[str, Any]:
         state["high"] = remap_high_state(plan.agent["high"], fresh["high"], list(agent.high.q.parameters()),
                                          index, keep_run=False)
         mapped["high"] = {"outputs": f"{kept}/{len(new_names)}"}
-        if "initiation" in fresh and "initiation" in plan.agent:    # counts by name (agents/initiation.py)
-            state["initiation"] = plan.agent["initiation"]
-            mapped["high"]["initiation_sets"] = len(plan.agent["initiation"].get("sets", []))
     if "low" in plan.parts:
         state["low"] = remap_low_state(plan.agent["low"], fresh["low"], agent.low, index, keep_run=False)
         mapped["low"] = {"goals": f"{kept}/{len(new_names)}"}

@@ -16,19 +16,8 @@ import torch
 from ..distributions.mh_kernels import coupling_matrix, run_chains
 from ..distributions.mrf import EXACT_LIMIT, PairwiseMRF
 
-__all__ = ["FALLBACK", "CONDITIONAL_EXACT_FREE", "CriticReadout", "unique_rows", "RANKING_DRAWS", "MARGINAL_CHAINS", "INDEPENDENT_BURN_IN_FACTOR",
+__all__ = ["CriticReadout", "unique_rows", "RANKING_DRAWS", "MARGINAL_CHAINS", "INDEPENDENT_BURN_IN_FACTOR",
            "NEAR_TIE_STANDARD_ERRORS"]
-
-#: Ĝt given achieved sub-goals where no sample holds them all (``loop.filter_fallback``): "mode", the
-#: unconditional mode (it can name a route the agent can no longer take: holding the key of a route
-#: the critic has dropped, Ĝt is the other route); "completion", q's completion of the achieved set
-#: (a local maximum reached from the achieved set alone: holding a sub-goal no edge joins, such as a
-#: corner cell passed on the way, it is that sub-goal alone); "conditional", the mode of
-#: q(w | w_achieved = 1) (:meth:`CriticReadout.conditional_mode`)
-FALLBACK = ("mode", "completion", "conditional")
-#: :meth:`CriticReadout.conditional_mode` enumerates the free sites up to this many (2^12 states a row),
-#: and above it searches from several starts
-CONDITIONAL_EXACT_FREE = 12
 
 RANKING_DRAWS = 10_000  # independent draws behind G* (standard error of a probability <= 0.005)
 MARGINAL_CHAINS = 4096  # fresh chains behind the marginals above exact_max_n before any update
@@ -63,19 +52,15 @@ class CriticReadout:
             raise RuntimeError("no update has run yet; call update() first")
         return self._last_samples.clone()
 
-    def filtered_set(self, given: torch.Tensor | None = None, fallback: str = "mode") -> torch.Tensor:
+    def filtered_set(self, given: torch.Tensor | None = None) -> torch.Tensor:
         """Sec. 3.4: the most frequent configuration among the last update's samples, BoolTensor (N,).
 
         ``given`` (bool, (N,) or (B, N)) conditions on sub-goals already achieved: the most frequent
         configuration among the samples with ``w_i = 1`` for every given ``i``, i.e. the mode of the
         samples from q(w | w_given = 1). Where no sample agrees with a row, that row gets the
-        unconditional mode (``fallback="mode"``), q's completion of the row (``"completion"``,
-        :meth:`completion`) or the mode of q given the row (``"conditional"``,
-        :meth:`conditional_mode`). The result has ``given``'s shape. Before the first update the samples are
+        unconditional mode. The result has ``given``'s shape. Before the first update the samples are
         the current chain states. Ties go to the lexicographically smallest configuration.
         """
-        if fallback not in FALLBACK:
-            raise ValueError(f"fallback must be one of {', '.join(FALLBACK)}, got {fallback!r}")
         _, configs, counts = self._sample_counts()
         mode = int(counts.argmax())
         if given is None:
@@ -88,11 +73,7 @@ class CriticReadout:
         best = torch.where(agree, counts[None], torch.zeros_like(counts)[None]).argmax(-1)
         missing = ~agree.any(-1)
         best = torch.where(missing, torch.full_like(best, mode), best)
-        out = configs[best].bool()
-        if fallback != "mode" and missing.any():
-            fill = self.completion if fallback == "completion" else self.conditional_mode
-            out[missing] = fill(rows[missing]).bool()
-        return out.reshape(given.shape)
+        return configs[best].bool().reshape(given.shape)
 
     def _given_rows(self, given) -> torch.Tensor:
         """``given`` as a bool tensor of shape (N,) or (B, N); any other shape is refused."""
@@ -129,44 +110,6 @@ class CriticReadout:
                 break
             w[arange[up], best[up]] = 1.0 - w[arange[up], best[up]]
         return w.bool().reshape(given.shape)
-
-    def conditional_mode(self, given: torch.Tensor) -> torch.Tensor:
-        """The most probable configuration under q holding every given sub-goal on: the mode of
-        q(w | w_given = 1), BoolTensor with ``given``'s shape ((N,) or (B, N)).
-
-        Exact where a row leaves at most :data:`CONDITIONAL_EXACT_FREE` sites free (all 2^F settings of
-        its F free sites are scored; ties go to the lexicographically smallest configuration, as in
-        :meth:`filtered_set`). Above that, the best of :meth:`completion`'s coordinate ascent started
-        from the row alone and from the row joined with each distinct configuration among the last
-        samples; a local maximum still, but one at least as probable as the completion and as the
-        unconditional mode with the row switched on. Unlike the completion, a given sub-goal that no
-        edge joins to the others (a cell the agent passed) does not hide the route q favours: the mode
-        given it is that route with it.
-        """
-        given = self._given_rows(given)
-        rows = given.reshape(-1, self.n)
-        theta = self._theta.detach().double()
-        J = coupling_matrix(self._coupling.detach().double(), self._edge_index, self.n)
-        out = torch.zeros_like(rows)
-        uniq, inverse = torch.unique(rows, dim=0, return_inverse=True)
-        best = torch.zeros_like(uniq)
-        for k, row in enumerate(uniq):
-            free = torch.nonzero(~row).flatten()
-            if free.numel() <= CONDITIONAL_EXACT_FREE:
-                f = free.numel()
-                # the settings of the free sites in lexicographic order of the full configuration
-                codes = torch.arange(2 ** f, dtype=torch.long)
-                bits = ((codes[:, None] >> torch.arange(f - 1, -1, -1)) & 1).double()
-                cand = row.double().repeat(2 ** f, 1)
-                cand[:, free] = bits
-            else:
-                _, configs, _ = self._sample_counts()
-                starts = torch.cat([row[None], row[None] | configs.bool()])
-                cand = self.completion(starts).double()
-            score = cand @ theta + 0.5 * ((cand @ J) * cand).sum(-1)
-            best[k] = cand[int(score.argmax())].bool()
-        out = best[inverse]
-        return out.reshape(given.shape)
 
     def _sample_counts(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """``(samples, configs, counts)``: the distinct configurations among the last update's samples

@@ -1,7 +1,6 @@
 """The episode skeleton: the metrics row of an episode, its reset seed and options, success from reset."""
 
 import numpy as np
-import pytest
 
 from hubsgo_ppl.agents.episode import EpisodeStats, EpisodeTally, reset_episode
 from hubsgo_ppl.agents.seeding import episode_seed
@@ -42,11 +41,16 @@ def test_success_on_reset_counts_only_when_noted():
     assert counted.stats(1, 1, 0.0, 0.0).success is True
 
 
-def test_tally_means_use_its_reducer():
+def test_tally_means_sum_left_to_right_unless_given_another_reducer():
+    # the exact mean is 0.5; summed left to right 1e16 + 1 rounds back to 1e16 (the spacing there is 2),
+    # so the running sum ends at 1 and the mean is 0.25
     values = [1e16, 1.0, -1e16, 1.0]
-    seq, pairwise = EpisodeTally(0), EpisodeTally(0, mean=lambda v: float(np.sum(v)) / len(v))
-    for tally in (seq, pairwise):
+    seq, largest = EpisodeTally(0), EpisodeTally(0, mean=max)
+    for tally in (seq, largest):
         for v in values:
-            tally.record({"x": v})
-    assert seq.means()["x"] == pytest.approx(0.25)                # ((1e16 + 1) - 1e16 + 1) / 4, left to right
-    assert pairwise.means()["x"] == float(np.sum(values)) / 4
+            tally.record({"x": v, "y": 2.0})
+        tally.record(None)                                  # no update ran: nothing recorded
+        tally.put("once", 7.0)
+    assert seq.means() == {"x": 0.25, "y": 2.0, "once": 7.0}
+    assert largest.means() == {"x": 1e16, "y": 2.0, "once": 7.0}
+    assert seq.stats(5, 2, 0.1, 0.2).scalars == {"x": 0.25, "y": 2.0, "once": 7.0}

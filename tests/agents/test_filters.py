@@ -1,13 +1,15 @@
 """The sub-goal filters: HUBS-GO's critic filter (the batch weight, the safeguard, outcome evidence) and h-DQN's none."""
 
 import dataclasses
+import re
 
 import numpy as np
 import pytest
 import torch
 
+from hubsgo_ppl.agents.config import ConfigError, make_config
 from hubsgo_ppl.agents.filters import CriticFilter, NoFilter
-from hubsgo_ppl.agents.loop import LoopConfig
+from hubsgo_ppl.agents.settings import LoopConfig
 from hubsgo_ppl.graph import SubgoalGraph
 from hubsgo_ppl.infer.critic import SubgoalCritic, TDBatch
 
@@ -40,12 +42,6 @@ def test_critic_filter_hands_the_batch_weight_to_the_critic():
     unweighted.update(dataclasses.replace(b, weight=1.0))
     assert torch.equal(via_filter._theta, direct._theta)
     assert not torch.equal(via_filter._theta, unweighted._theta)
-
-
-def test_loop_config_pool_weight():
-    assert LoopConfig().critic_pool_weight == "mean"
-    with pytest.raises(ValueError, match="critic_pool_weight must be 'mean' or 'sum'"):
-        LoopConfig(critic_pool_weight="max")
 
 
 def goal_dropping_critic(seed=0):
@@ -102,13 +98,13 @@ def test_safeguard_can_be_turned_off_and_bad_values_are_refused():
     f.update(batches(1)[0])
     f.end_episode(np.ones(5, dtype=bool), success=True)
     assert not f.allowed()[4]
-    with pytest.raises(ValueError, match="filter_keep must be in"):
-        CriticFilter(goal_dropping_critic(), keep_fraction=1.5)
-    with pytest.raises(ValueError, match="outcome_window must be a positive integer"):
-        CriticFilter(goal_dropping_critic(), outcome_window=0)
-    with pytest.raises(ValueError, match="filter_start and loop.filter_end must be in"):
-        LoopConfig(filter_end=1.2)
-    assert LoopConfig().filter_end < 1.0     # the loop's own guard: a share of decisions reads G0
+    # the filter's settings are the loop's, checked where they are declared
+    for key, value, says in [("filter_keep", 1.5, "a number in [0, 1]"), ("outcome_window", 0, "an integer >= 1"),
+                             ("filter_end", 1.2, "a number in [0, 1]")]:
+        with pytest.raises(ConfigError, match=rf"^loop.{key} takes {re.escape(says)} \(default .*\), got {value}$"):
+            make_config("loop", LoopConfig, {key: value}, total_steps=10)
+    # the loop's own guard in both families: a share of the decisions reads G0
+    assert LoopConfig.minigrid().filter_end < 1.0 and LoopConfig.robosuite().filter_end < 1.0
 
 
 def test_outcome_critic_waits_for_the_first_success_then_learns_the_route():
@@ -177,41 +173,6 @@ def test_before_its_first_update_the_filter_can_read_the_priors_completion():
     f.update(TDBatch(q[:, 0], q, torch.zeros(16), torch.full((16,), 0.9)))   # after it: the critic's mode
     assert f.allowed(holds_bk).tolist() == (f.critic.filtered_set(given=torch.as_tensor(holds_bk)).numpy()
                                             | f._keep).tolist()
-    with pytest.raises(ValueError, match="filter_before_update must be one of g0, completion"):
-        CriticFilter(prior_critic(), before_update="prior")
+    with pytest.raises(ConfigError, match=r"^loop.filter_before_update takes one of 'g0', 'completion' "):
+        make_config("loop", LoopConfig, {"filter_before_update": "prior"})
 
-
-def test_holding_a_key_no_sample_holds_the_filter_can_fall_back_to_the_completion():
-    # after an update that has learned the yellow route, no sample holds the blue key; an agent that
-    # picked it up anyway gets the yellow route from the unconditional mode (a route it can no longer
-    # take), and with filter_fallback "completion" q's completion of what it holds (here the blue key
-    # alone: the loop then reads G0, where the blue door and the goal are)
-    graph = SubgoalGraph(["yk", "yd", "bk", "bd", "goal"],
-                         [("yk", "yd", 1), ("bk", "bd", 1), ("yk", "bk", -1), ("yd", "bd", -1),
-                          ("yd", "goal", 1), ("bd", "goal", 1)])
-    from hubsgo_ppl.infer.critic import InferenceConfig
-
-    def outcome_critic():      # the evidence at full weight (power 1), so that no sample holds the blue key
-        return SubgoalCritic(graph, prior="ising", prior_params={"strength": 3.0, "field": -2.0},
-                             likelihood="outcome", likelihood_params={"power": 1.0},
-                             config=InferenceConfig(init="prior"), seed=0)
-
-    filters = {fb: CriticFilter(outcome_critic(), keep_fraction=0.0, fallback=fb) for fb in ("mode", "completion")}
-    yellow = np.array([True, True, False, False, True])
-    holds_bk = np.array([False, False, True, False, False])
-    q = torch.rand(16, 5, generator=torch.Generator().manual_seed(0))
-    batch = TDBatch(q[:, 0], q, torch.zeros(16), torch.full((16,), 0.9), available=torch.ones(16, 5, dtype=torch.bool))
-    for f in filters.values():
-        f.end_episode(yellow, success=True)
-        for _ in range(60):
-            f.update(batch)
-        assert not f.critic.last_samples()[:, 2].bool().any(), "a sample holds the blue key; the test needs none"
-    assert filters["mode"].allowed(holds_bk).tolist() == filters["mode"].allowed().tolist() == yellow.tolist()
-    expected = filters["completion"].critic.completion(torch.as_tensor(holds_bk)).numpy()
-    got = filters["completion"].allowed(holds_bk)
-    assert got.tolist() == expected.tolist()
-    assert got[2] and not got[0] and not got[1]       # it holds the blue key and names no yellow sub-goal
-    with pytest.raises(ValueError, match="loop.filter_fallback must be one of mode, completion"):
-        CriticFilter(outcome_critic(), fallback="nearest")
-    with pytest.raises(ValueError, match="loop.filter_fallback must be one of mode, completion"):
-        LoopConfig(filter_fallback="nearest")

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 import torch
 
-from hubsgo_ppl.agents.high_level import HighLevelBatch, HighLevelConfig, HighLevelDQN, linked_rows, masked_max
+from hubsgo_ppl.agents.high_level import HighLevelBatch, HighLevelConfig, HighLevelDQN, masked_max
 
 
 def test_masked_max_matches_python_reference_and_empty_is_zero():
@@ -59,59 +59,3 @@ def test_update_reduces_td_loss_on_a_fixed_problem():
     for _ in range(200):
         last = dqn.update(None)[0]["high/td_loss"]
     assert last < 0.1 * first
-
-
-def _rows_of_flags(n: int, width: int = 3):
-    """A stand-in for an env's subgoal_features: obs (..., n + width) -> rows whose column 0 is the
-    sub-goal's own flag (obs[..., i]) and the rest the shared tail."""
-    def feat(obs):
-        flags = obs[..., :n].unsqueeze(-1)
-        tail = obs[..., n:].unsqueeze(-2).expand(*obs.shape[:-1], n, width)
-        return torch.cat([flags, tail], -1)
-
-    feat.dim, feat.flag = 1 + width, 0
-    return feat
-
-
-def test_linked_rows_add_whether_a_positive_and_a_negative_neighbour_is_achieved():
-    n = 5
-    edges = [(0, 1, 1), (2, 3, 1), (0, 2, -1), (1, 3, -1), (3, 4, 1), (1, 4, 0)]      # the 0 edge links nothing
-    pos = {0: {1}, 1: {0}, 2: {3}, 3: {2, 4}, 4: {3}}
-    neg = {0: {2}, 1: {3}, 2: {0}, 3: {1}, 4: set()}
-    feat = linked_rows(_rows_of_flags(n), n, edges)
-    assert feat.dim == 1 + 3 + 2
-    for bits in range(2 ** n):
-        flags = [float((bits >> i) & 1) for i in range(n)]
-        obs = torch.tensor(flags + [0.5, -1.0, 2.0])
-        rows = feat(obs)
-        assert rows.shape == (n, feat.dim)
-        for i in range(n):
-            assert rows[i, :4].tolist() == [flags[i], 0.5, -1.0, 2.0]
-            assert rows[i, 4].item() == float(any(flags[j] for j in pos[i]))
-            assert rows[i, 5].item() == float(any(flags[j] for j in neg[i]))
-    batch = torch.rand(7, n + 3) > 0.5
-    np.testing.assert_array_equal(feat(batch.float()).numpy(), torch.stack([feat(o.float()) for o in batch]).numpy())
-    assert not linked_rows(_rows_of_flags(n), n, [])(torch.ones(n + 3))[:, 4:].any()
-
-
-def test_a_high_level_over_rows_values_each_subgoal_by_its_own_row_only():
-    n = 4
-    feat = linked_rows(_rows_of_flags(n), n, [(0, 1, 1), (2, 3, -1)])
-    high = HighLevelDQN(n + 3, n, HighLevelConfig(hidden=(16,), goal_features=True), torch.Generator().manual_seed(0),
-                        np.random.default_rng(0), features=feat)
-    assert high.q[-1].out_features == 1                 # one value per row, no output per sub-goal
-    obs = np.array([1.0, 0.0, 0.0, 1.0, 0.3, -0.2, 0.7], np.float32)
-    q = high.q_values(obs)
-    rows = feat(torch.as_tensor(obs))
-    with torch.no_grad():
-        np.testing.assert_allclose(q, [high.q(rows[i]).item() for i in range(n)], rtol=1e-6)
-    # sub-goals whose rows are equal get equal values, whatever their place in the catalogue
-    same = np.array([0.0, 0.0, 0.0, 0.0, 0.3, -0.2, 0.7], np.float32)
-    assert np.unique(high.q_values(same)).size == 1
-    for _ in range(80):                                 # and the TD step runs through the rows
-        high.store(obs, 1, 1.0, same, 0.9, np.ones(n, bool))
-    stats, batch = high.update(None)
-    assert np.isfinite(stats["high/td_loss"]) and batch.q_next.shape == (64, n)
-    plain = HighLevelDQN(n + 3, n, HighLevelConfig(hidden=(16,)), torch.Generator().manual_seed(0),
-                         np.random.default_rng(0), features=feat)
-    assert plain.features is None and plain.q[-1].out_features == n     # the option off: one output each

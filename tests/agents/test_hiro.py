@@ -147,7 +147,7 @@ def test_hiro_rejects_unknown_settings():
         build_hiro(make("fourroom"), cfg, seed=0)
     del cfg["hiro"]["horizon"]
     cfg["hiro"]["c"] = 0
-    with pytest.raises(ValueError, match="hiro.c, hiro.batch_size and hiro.temperature must be positive"):
+    with pytest.raises(ValueError, match=r"^hiro.c takes an integer >= 1 \(default 10\), got 0$"):
         build_hiro(make("fourroom"), cfg, seed=0)
 
 

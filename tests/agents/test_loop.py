@@ -86,13 +86,6 @@ def test_filter_is_updated_once_per_high_level_update_or_every_k():
     assert loop4.high.updates > 8 and filt4.updates == loop4.high.updates // 4
     assert filt4.rows == 4 * filt4.updates * loop4.high.cfg.batch_size     # each minibatch seen once
     assert set(filt4.weights) == {0.25}
-    # critic_pool_weight = "sum": the same pools, each transition at full weight (KeyDoor's preset)
-    loop_sum = _loop(steps=400, extra=["loop.critic_every=4", "loop.critic_pool_weight=sum"])
-    filt_sum = FixedSetFilter([True] * 5)
-    loop_sum.filter = filt_sum
-    while loop_sum.env_steps < 400:
-        loop_sum.run_episode(train=True)
-    assert filt_sum.updates == filt4.updates and set(filt_sum.weights) == {1.0}
     # the minibatches still pending travel with the checkpoint
     pending = loop4.high.updates % 4
     other = _loop(steps=400, extra=["loop.critic_every=4"])
@@ -221,100 +214,6 @@ def test_eval_episode_does_not_advance_training_counters():
     assert (loop.env_steps, loop.episodes, loop.high.updates) == before
 
 
-def test_low_level_exploration_is_annealed_per_goal_by_success_rate():
-    """h-DQN's adaptive ε: a goal the low level cannot reach yet keeps ε near 1; a mastered one gets the schedule's."""
-    rates = np.array([1.0, 0.0, 0.75, 1.0, 1.0])
-    for adaptive in (True, False):
-        for g in (0, 1, 2):
-            loop = _loop(extra=[f"loop.low_explore_adaptive={str(adaptive).lower()}"])
-            calls = []
-            act = loop.low.act
-            loop.low.act = lambda obs, goal, eps, env, act=act: calls.append((goal, eps)) or act(obs, goal, eps, env)
-            loop._low_explore = lambda progress: 0.1
-            loop.high.select = lambda obs, allowed, eps, g=g: g
-            loop.success_rate[:] = rates
-            loop.run_episode(train=True)
-            first_goal, first_eps = calls[0]
-            assert first_goal == g
-            assert first_eps == pytest.approx(max(0.1, min(0.5, 1.0 - rates[g])) if adaptive else 0.1)
-            # the rate is a moving average of the options' outcomes, and a checkpoint carries it
-            assert loop.success_rate[g] != rates[g] or rates[g] in (0.0, 1.0)
-            other = _loop()
-            other.load_state_dict(loop.state_dict())
-            assert np.array_equal(other.success_rate, loop.success_rate)
-    # greedy evaluation never explores (its cycle rule aside, tested above)
-    loop = _loop()
-    loop.cfg.eval_break_cycles = False
-    calls = []
-    act = loop.low.act
-    loop.low.act = lambda obs, goal, eps, env: calls.append(eps) or act(obs, goal, eps, env)
-    loop.run_episode(train=False)
-    assert set(calls) == {0.0}
-
-
-def test_schedules_can_start_at_the_first_extrinsic_reward():
-    loop = _loop(steps=1000, extra=["loop.schedule_from=first_reward"])
-    loop.env_steps = 300
-    assert loop.first_reward_step is None and loop.schedule_progress() == 0.0
-    loop.first_reward_step = 200
-    assert loop.schedule_progress() == pytest.approx(100 / 800)
-    start = _loop(steps=1000, extra=["loop.schedule_from=start"])
-    start.env_steps = 300
-    assert start.schedule_progress() == pytest.approx(0.3)
-    # the loop records the env step of the first extrinsic reward (here a wrapper pays at step 25)
-    import gymnasium as gym
-
-    class PayAt(gym.Wrapper):
-        t = 0
-
-        def step(self, action):
-            obs, r, term, trunc, info = self.env.step(action)
-            PayAt.t += 1
-            return obs, (0.5 if PayAt.t == 25 else r), term, trunc, info
-
-    unpaid = _loop(steps=1000, extra=["loop.schedule_from=first_reward"])
-    assert unpaid.run_episode(train=True).explore_eps == 1.0      # no reward: ε stays at its start
-    loop = _loop(steps=1000, extra=["loop.schedule_from=first_reward"])
-    loop.env = PayAt(loop.env)
-    first = loop.run_episode(train=True)
-    assert loop.first_reward_step == 25 and first.explore_eps < 1.0
-    other = _loop(extra=["loop.schedule_from=first_reward"])
-    other.load_state_dict(loop.state_dict())
-    assert other.first_reward_step == loop.first_reward_step
-    with pytest.raises(ValueError, match="schedule_from"):
-        _loop(extra=["loop.schedule_from=later"])
-
-
-def test_recent_success_caps_the_exploration_it_is_asked_to_cap():
-    """explore_by_success: ε is at most max(end, 1 - success rate of the last outcome_window episodes)."""
-    window = ["loop.outcome_window=4"]
-    expect = {"none": (1.0, 1.0), "high": (0.5, 1.0), "both": (0.5, 0.5)}
-    for mode, (high_eps, low_eps) in expect.items():
-        loop = _loop(extra=window + [f"loop.explore_by_success={mode}"])
-        loop._recent.extend([True, False, True])        # 2 successes in a window of 4: the rate is 0.5
-        assert loop._cap_by_success(1.0, 1.0) == pytest.approx((high_eps, low_eps))
-        assert loop._cap_by_success(0.2, 0.3) == pytest.approx((0.2, 0.3))    # never above the schedule
-        loop._recent.extend([True, True, True, True])      # every recent episode succeeded: the end values
-        capped = loop._cap_by_success(1.0, 1.0)
-        assert capped == pytest.approx({"none": (1.0, 1.0), "high": (0.05, 1.0), "both": (0.05, 0.05)}[mode])
-    # the loop applies the cap to the ε it explores with, records each training episode's success,
-    # and a checkpoint carries the window
-    loop = _loop(extra=window + ["loop.explore_by_success=both"])
-    loop._explore = loop._low_explore = lambda progress: 0.9
-    calls = []
-    act = loop.low.act
-    loop.low.act = lambda obs, goal, eps, env: calls.append(eps) or act(obs, goal, eps, env)
-    loop._recent.extend([True, True, True, False])
-    stats = loop.run_episode(train=True)
-    assert stats.explore_eps == pytest.approx(0.25) and calls[0] == pytest.approx(0.25)
-    assert list(loop._recent) == [True, True, False, stats.success]
-    other = _loop(extra=window + ["loop.explore_by_success=both"])
-    other.load_state_dict(loop.state_dict())
-    assert list(other._recent) == list(loop._recent)
-    with pytest.raises(ValueError, match="loop.explore_by_success must be one of none, high, both"):
-        _loop(extra=["loop.explore_by_success=always"])
-
-
 def test_the_agent_settles_once_its_recent_success_reaches_settle_at_and_stays_settled():
     """The agent settles at the end of the episode that brings the success rate over the last
     outcome_window episodes to settle_at; the latch survives failures and a checkpoint. Training never
@@ -342,9 +241,9 @@ def test_the_agent_settles_once_its_recent_success_reaches_settle_at_and_stays_s
     never._recent.extend([True] * 4)
     never.run_episode(train=True)
     assert never.settled_step is None
-    with pytest.raises(ValueError, match=r"loop.settle_at must be in \(0, 1\], or null"):
+    with pytest.raises(ValueError, match=r"^loop.settle_at takes a number in \(0, 1\], or null \(default 0.9\), got 1.5$"):
         _loop(extra=["loop.settle_at=1.5"])
-    with pytest.raises(ValueError, match="loop.settle_updates must be a positive integer"):
+    with pytest.raises(ValueError, match=r"^loop.settle_updates takes an integer >= 1 \(default 300\), got 0$"):
         _loop(extra=["loop.settle_updates=0"])
 
 
@@ -381,87 +280,58 @@ def test_g_star_is_read_from_the_critic_refitted_at_the_settled_power_once_the_a
     assert loop.g_star_critic() is not read
 
 
-def test_the_success_rate_over_played_episodes_caps_from_the_first_success():
-    """success_rate_over=played: the cap is 1 - successes / (episodes + 1) over the window's episodes."""
-    loop = _loop(extra=["loop.outcome_window=4", "loop.explore_by_success=both", "loop.success_rate_over=played"])
-    assert loop._cap_by_success(1.0, 1.0) == pytest.approx((1.0, 1.0))          # nothing played: no cap
-    loop._recent.extend([False, False])
-    assert loop._cap_by_success(1.0, 1.0) == pytest.approx((1.0, 1.0))          # no success yet: no cap
-    loop._recent.append(True)                                                  # a first success: 1/4
-    assert loop._cap_by_success(1.0, 1.0) == pytest.approx((0.75, 0.75))
-    loop._recent.extend([True, True, True])                                    # 4 of the window's 4: 4/5
-    assert loop._cap_by_success(1.0, 1.0) == pytest.approx((0.2, 0.2))
-    loop.cfg.explore_end = loop.cfg.low_explore_end = 0.3
-    assert loop._cap_by_success(1.0, 1.0) == pytest.approx((0.3, 0.3))         # not below the end values
-    loop._recent.extend([False, False])                                        # 2 of 4: 2/5
-    assert loop._cap_by_success(0.9, 0.5) == pytest.approx((0.6, 0.5))         # nor above the schedule
-    window = _loop(extra=["loop.outcome_window=4", "loop.explore_by_success=both"])
-    window._recent.append(True)                                                # the default: 1/4 of the window
-    assert window._cap_by_success(1.0, 1.0) == pytest.approx((0.75, 0.75))
-    window._recent.extend([True, False])                                       # 2/4
-    assert window._cap_by_success(1.0, 1.0) == pytest.approx((0.5, 0.5))
-    with pytest.raises(ValueError, match="loop.success_rate_over must be one of window, played"):
-        _loop(extra=["loop.success_rate_over=all"])
-
-
 def test_marginal_goal_weights_follow_the_critic_after_each_update():
-    """low_goal_weight=marginal: after a critic update the low level weighs g by max(P(w_g = 1), 1 - filter_end)."""
+    """low_goal_weight=marginal: after each critic update from evidence the low level weighs sub-goal g by its
+    marginal, floored at 1 - filter_end; an update without evidence changes nothing; h-DQN weighs all alike."""
+    from hubsgo_ppl.agents.filters import CriticFilter
     from hubsgo_ppl.graph import SubgoalGraph
     from hubsgo_ppl.infer.critic import SubgoalCritic
 
+    class KnownMarginals(CriticFilter):
+        """A critic filter whose marginals are set by the test; its updates learn from evidence or not."""
+
+        marginal = [0.9, 0.1, 0.5, 0.3, 0.95]
+        evidence = True
+
+        def update(self, batch):
+            return {"critic/loss": 1.0} if self.evidence else {}
+
+        def marginals(self):
+            return np.array(self.marginal)
+
     register()
     names = ["yellow_key", "yellow_door", "blue_key", "blue_door", "goal"]
-    SPARSE = {"strength": 3.0, "field": -2.0}
-    graph = SubgoalGraph(names, [("yellow_key", "yellow_door", 1), ("blue_key", "blue_door", 1)])
+    critic = SubgoalCritic(SubgoalGraph(names, [("yellow_key", "yellow_door", 1)]), seed=0)
     cfg = apply_overrides(preset("minigrid"), SMALL + ["loop.low_goal_weight=marginal", "loop.critic_every=1",
                                                        "loop.filter_end=0.6"])
     cfg["steps"] = 600
-    critic = SubgoalCritic(graph, prior="ising", prior_params=SPARSE, likelihood_params={"scale": 0.1},
-                           seed=0)                          # a TD likelihood: updates from the first minibatch
     loop = build_agent("hubsgo", make("keydoor", max_steps=60), cfg, seed=5, critic=critic)
+    loop.filter = KnownMarginals(critic)
+    loop._weighs_low = True
     assert loop.low.goal_weight is None                     # all alike before the critic's first update
-    while loop.env_steps < 200:
+    while loop.high.updates == 0:
         loop.run_episode(train=True)
-    expected = np.maximum(loop.filter.marginals(), 0.4)
-    assert expected.min() == pytest.approx(0.4) and expected.max() > 0.4       # the floor and the marginals act
-    assert np.allclose(loop.low.goal_weight.numpy(), expected, atol=1e-6)
+    assert loop.low.goal_weight.tolist() == pytest.approx([0.9, 0.4, 0.5, 0.4, 0.95])     # floor 1 - 0.6
+    KnownMarginals.marginal, KnownMarginals.evidence = [0.2, 0.2, 0.2, 0.2, 0.2], False
+    updates = loop.high.updates
+    while loop.high.updates == updates:
+        loop.run_episode(train=True)
+    assert loop.low.goal_weight.tolist() == pytest.approx([0.9, 0.4, 0.5, 0.4, 0.95])     # no evidence: kept
+    KnownMarginals.evidence = True
+    updates = loop.high.updates
+    while loop.high.updates == updates:
+        loop.run_episode(train=True)
+    assert loop.low.goal_weight.tolist() == pytest.approx([0.4] * 5)
     other = build_agent("hubsgo", make("keydoor", max_steps=60), cfg, seed=5,
-                        critic=SubgoalCritic(graph, prior="ising", prior_params=SPARSE,
-                                             likelihood_params={"scale": 0.1}, seed=0))
+                        critic=SubgoalCritic(SubgoalGraph(names, [("yellow_key", "yellow_door", 1)]), seed=0))
     other.load_state_dict(loop.state_dict())
     assert torch.equal(other.low.goal_weight, loop.low.goal_weight)
     hdqn = _loop(extra=["loop.low_goal_weight=marginal"])                     # h-DQN: no critic to read
     while hdqn.env_steps < 200:
         hdqn.run_episode(train=True)
     assert hdqn.low.steps > 32 and hdqn.low.goal_weight is None               # trained, every sub-goal alike
-    with pytest.raises(ValueError, match="loop.low_goal_weight must be one of uniform, marginal"):
+    with pytest.raises(ValueError, match="^loop.low_goal_weight takes one of 'uniform', 'marginal' "):
         _loop(extra=["loop.low_goal_weight=ranked"])
-
-
-@pytest.mark.parametrize("mode", ["marginal", "prior_marginal"])
-def test_before_the_first_success_only_prior_marginal_weighs_the_low_level(mode):
-    """An outcome critic does not update before the first success: "marginal" leaves the weights
-    uniform (None); "prior_marginal" reads the prior's marginals once, at the first update call."""
-    from hubsgo_ppl.graph import SubgoalGraph
-    from hubsgo_ppl.infer.critic import SubgoalCritic
-
-    register()
-    names = ["yellow_key", "yellow_door", "blue_key", "blue_door", "goal"]
-    graph = SubgoalGraph(names, [("yellow_key", "yellow_door", 1), ("blue_key", "blue_door", 1)])
-    cfg = apply_overrides(preset("minigrid"), SMALL + [f"loop.low_goal_weight={mode}", "loop.critic_every=1",
-                                                       "loop.filter_end=0.4"])
-    cfg["steps"] = 600
-    critic = SubgoalCritic(graph, prior="ising", prior_params={"strength": 3.0, "field": -2.0},
-                           likelihood="outcome", seed=0)
-    prior = np.maximum(critic.marginals().numpy(), 0.6)                # exact at N = 5
-    loop = build_agent("hubsgo", make("keydoor", max_steps=60), cfg, seed=5, critic=critic)
-    while loop.env_steps < 150:
-        loop.run_episode(train=True)
-    assert loop.high.ready() and len(loop.filter.outcomes()) == 0      # update calls, no success yet
-    if mode == "marginal":
-        assert loop.low.goal_weight is None
-    else:
-        assert np.allclose(loop.low.goal_weight.numpy(), prior, atol=1e-6) and prior.min() == pytest.approx(0.6) and prior.max() > 0.6
 
 
 def test_low_level_shaping_uses_the_env_potential_and_refuses_to_run_without_one():
@@ -510,39 +380,6 @@ def test_the_filter_hears_each_training_episode_with_every_subgoal_achieved_on_t
             assert visited[names.index("goal")]
 
 
-def test_learned_initiation_sets_narrow_the_choice_only_when_the_loop_reads_ghat():
-    loop = _loop(extra=["loop.filter_refresh=option", "loop.initiation_tries=2"])
-    loop.filter = FixedSetFilter([True, True, False, False, True])    # Ĝt: the yellow route
-    start = np.zeros(5, bool)
-    for _ in range(2):
-        loop.initiation.record(start, 1, False)     # yellow_door from the start: fails twice ...
-        loop.initiation.record(start, 4, False)     # ... and so does the goal
-        loop.initiation.record(np.array([True, False, False, False, False]), 1, True)   # the door opens with the key
-    assert loop._allowed(start, filter_eps=1.0).tolist() == [True, False, False, False, True]
-    assert loop._allowed(start, filter_eps=0.0).tolist() == [True] * 5          # G0: nothing left out
-    for _ in range(2):
-        loop.initiation.record(np.array([True, True, False, False, False]), 4, True)
-    assert loop._allowed(start, filter_eps=1.0).tolist() == [True, False, False, False, False]
-    # Ĝt holds nothing open here: the choice is the open sub-goals of G0, not every one
-    loop.filter = FixedSetFilter([False, True, False, False, True])
-    assert loop._allowed(start, filter_eps=1.0).tolist() == [True, False, True, True, False]
-
-
-def test_initiation_sets_count_every_training_option_where_it_started_and_resume():
-    off = _loop(agent="hdqn")
-    assert off.initiation is None and "initiation" not in off.state_dict()
-    on = _loop(agent="hdqn", extra=["loop.initiation_tries=3"])
-    options = sum(on.run_episode().options for _ in range(3))
-    state = on.state_dict()["initiation"]
-    tries = sum(t for row in state["sets"] for t in row["tries"].values())
-    assert tries == options                 # every training option counted once, where it started
-    assert on.run_episode(train=False) and sum(
-        t for row in on.state_dict()["initiation"]["sets"] for t in row["tries"].values()) == tries   # not greedy ones
-    resumed = _loop(agent="hdqn", extra=["loop.initiation_tries=3"])
-    resumed.load_state_dict(on.state_dict())
-    assert resumed.initiation.state_dict() == state
-
-
 def test_the_loop_logs_every_option_with_its_start_and_outcome():
     loop = _loop()
     for _ in range(3):
@@ -575,14 +412,3 @@ def _choices(extra, episodes=12):
         loop.run_episode()
     return seen, stored
 
-
-def test_exclude_impossible_never_offers_nor_bootstraps_from_a_subgoal_that_can_no_longer_hold():
-    seen, stored = _choices(["loop.exclude_impossible=true"])
-    assert any((~possible).any() for _, possible in seen)          # a key was held in some choices
-    for allowed, possible in seen + stored:
-        if possible.any():
-            assert not (allowed & ~possible).any()
-    # off (the default): the other key and its door stay on offer
-    seen, _ = _choices([])
-    assert any((allowed & ~possible).any() and possible.any()
-               for allowed, possible in seen)

@@ -2,6 +2,8 @@
 
 import math
 
+import pytest
+
 import torch
 from torch import nn
 
@@ -33,3 +35,46 @@ def test_seeded_init_uses_torchs_default_bounds():
     bound = 1 / math.sqrt(25)
     for p in (layer.weight, layer.bias):
         assert p.abs().max() <= bound and p.abs().max() > 0.95 * bound
+
+
+def _linear(generator):
+    """A one-weight network w * x + b, so that a step can be computed by hand."""
+    return mlp(1, [], 1, generator)
+
+
+def test_target_network_starts_equal_then_follows_by_polyak_after_a_plain_adam_step():
+    from hubsgo_ppl.agents.nets import TargetNetwork
+
+    g = torch.Generator().manual_seed(0)
+    net = TargetNetwork(lambda: _linear(g), lr=0.1, tau=0.25)
+    w0, b0 = net.online[0].weight.item(), net.online[0].bias.item()
+    assert net.target[0].weight.item() == w0 and net.target[0].bias.item() == b0
+    x = torch.tensor([[2.0]])
+    net.step((net.online(x) - 10.0).pow(2).sum())
+    # Adam's first step moves each parameter by lr against the sign of its gradient (here: up)
+    w1, b1 = net.online[0].weight.item(), net.online[0].bias.item()
+    assert w1 == pytest.approx(w0 + 0.1, abs=1e-6) and b1 == pytest.approx(b0 + 0.1, abs=1e-6)
+    assert net.target[0].weight.item() == pytest.approx(0.75 * w0 + 0.25 * w1, abs=1e-7)
+    assert net.target[0].bias.item() == pytest.approx(0.75 * b0 + 0.25 * b1, abs=1e-7)
+
+
+def test_target_network_clips_gradients_where_asked_and_round_trips_under_the_learners_names():
+    from hubsgo_ppl.agents.nets import TargetNetwork
+
+    def sgd_step(grad_clip):
+        g = torch.Generator().manual_seed(1)
+        net = TargetNetwork(lambda: _linear(g), lr=1.0, tau=1.0, grad_clip=grad_clip)
+        net.opt = torch.optim.SGD(net.online.parameters(), lr=1.0)      # a step of exactly the gradient
+        before = [p.detach().clone() for p in net.online.parameters()]
+        net.step((net.online(torch.tensor([[3.0]])) - 100.0).pow(2).sum())
+        return net, torch.cat([(b - p.detach()).flatten() for b, p in zip(before, net.online.parameters())])
+
+    _, free = sgd_step(None)
+    net, clipped = sgd_step(0.5)
+    assert free.norm() > 10 and float(clipped.norm()) == pytest.approx(0.5, rel=1e-5)
+    assert torch.allclose(clipped / clipped.norm(), free / free.norm())         # the direction kept
+    state = net.state_dict(target="q_t")
+    assert set(state) == {"q", "q_t", "opt"}
+    other = TargetNetwork(lambda: _linear(torch.Generator().manual_seed(9)), lr=1.0, tau=1.0)
+    other.load_state_dict(state, target="q_t")
+    assert torch.equal(other.target[0].weight, net.target[0].weight)

@@ -72,8 +72,8 @@ def test_plan_or_none_bounds_the_search():
     assert bfs.plan_or_none(env, key, max_states=3) is None          # gave up
     path = bfs.plan_or_none(env, key)
     assert path and len(path) < len(bfs.plan(env))
-    with pytest.raises(ValueError, match="max_states must be a positive integer"):
-        ScriptedMaze(max_states=0)
+    with pytest.raises(ValueError, match=r"low.max_states takes an integer >= 1 \(default 200000\), got 0$"):
+        resolve_hyper("minigrid", "keydoor", "hubsgo", ["low.max_states=0"], low_level="scripted")
     with pytest.raises(TypeError, match="not a maze task"):
         ScriptedMaze().act(_NotAMaze(), 0)
 

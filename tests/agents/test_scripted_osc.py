@@ -47,10 +47,12 @@ def run_sequence(env, names: list[str], seed: int, per_goal: int):
 
 
 def test_rejects_bad_settings():
-    with pytest.raises(ValueError, match="gain must be > 0"):
-        ScriptedOSC(gain=0.0)
-    with pytest.raises(ValueError, match="tolerance must be >= 0"):
-        ScriptedOSC(tolerance=-1e-3)
+    from hubsgo_ppl.agents.config import ConfigError, resolve_hyper
+
+    with pytest.raises(ConfigError, match=r"^--set low.gain=0: low.gain takes a finite number > 0 \(default 20.0\), got 0$"):
+        resolve_hyper("robosuite", "push_any_one", "hubsgo", ["low.gain=0"])
+    with pytest.raises(ConfigError, match=r"low.tolerance takes a finite number >= 0 \(default 0.002\), got '-1e-3'$"):
+        resolve_hyper("robosuite", "push_any_one", "hubsgo", ["low.tolerance=-1e-3"])
 
 
 def test_rejects_an_env_without_the_subgoal_interface():

@@ -206,68 +206,6 @@ def test_a_run_without_a_critic_is_refused(tmp_path):
     assert not (run / "revisions").exists()
 
 
-def test_a_revision_carries_the_learned_initiation_sets_by_name(tmp_path):
-    spec = _spec(tmp_path / "initial.yaml", "initial", FIVE + CORNERS, EDGES)
-    run = tmp_path / "run"
-    train(RunConfig(task="keydoor_incorrect", model=str(spec), steps=STEPS, seed=1,
-                    overrides=[*TINY, "loop.initiation_tries=3"]), run, progress=False, stop_at=PAUSE)
-    before = load_checkpoint(run / "checkpoint.pt")["agent"]["initiation"]
-    apply_revision(run, _spec(tmp_path / "five.yaml", "five", FIVE, EDGES))
-    after = load_checkpoint(run / "checkpoint.pt")["agent"]["initiation"]
-    # the sets that name no corner stay with their counts, less those of options towards a corner
-    want = [{"achieved": row["achieved"], "tries": {n: t for n, t in row["tries"].items() if n in FIVE},
-             "hits": {n: h for n, h in row["hits"].items() if n in FIVE}}
-            for row in before["sets"] if not set(row["achieved"]) & set(CORNERS)]
-    assert any(set(row["tries"]) & set(CORNERS) for row in before["sets"])     # the drop removes counts
-    assert after == {"names": FIVE, "sets": want}
-    train(RunConfig(task="keydoor_incorrect"), run, resume=True, progress=False)     # and the run goes on
-
-
-def test_a_revision_keeps_a_shared_low_level_whole_and_drops_the_dropped_goals_from_its_buffer(tmp_path):
-    spec = _spec(tmp_path / "initial.yaml", "initial", FIVE + CORNERS, EDGES)
-    run = tmp_path / "run"
-    train(RunConfig(task="keydoor_incorrect", model=str(spec), steps=STEPS, seed=1,
-                    overrides=[*TINY, "env.obs_mode=egocentric", "low.goal_features=true"]),
-          run, progress=False, stop_at=PAUSE)
-    before = load_checkpoint(run / "checkpoint.pt")["agent"]["low"]
-    apply_revision(run, _spec(tmp_path / "five.yaml", "five", FIVE, EDGES))
-    after = load_checkpoint(run / "checkpoint.pt")["agent"]["low"]
-    for net in ("q", "q_target"):       # one network for every sub-goal: nothing to add or drop
-        assert after[net].keys() == before[net].keys()
-        assert all(torch.equal(after[net][k], before[net][k]) for k in before[net])
-    n = before["buffer"]["data"]["before"].shape[0]
-    kept = [(FIVE + CORNERS).index(g) for g in FIVE]
-    for k in ("before", "after"):       # the buffer's achievement columns follow the spec by name
-        assert after["buffer"]["data"][k].shape == (n, 5)
-        assert torch.equal(torch.as_tensor(after["buffer"]["data"][k]),
-                           torch.as_tensor(before["buffer"]["data"][k])[:, kept])
-    train(RunConfig(task="keydoor_incorrect"), run, resume=True, progress=False)
-    assert load_checkpoint(run / "checkpoint.pt")["env_steps"] >= STEPS
-
-
-def test_a_revision_keeps_a_high_level_over_rows_whole_and_renumbers_its_buffer_by_name(tmp_path):
-    spec = _spec(tmp_path / "initial.yaml", "initial", FIVE + CORNERS, EDGES)
-    run = tmp_path / "run"
-    train(RunConfig(task="keydoor_incorrect", model=str(spec), steps=STEPS, seed=1,
-                    overrides=[*TINY, "env.obs_mode=egocentric", "high.goal_features=true"]),
-          run, progress=False, stop_at=PAUSE)
-    before = load_checkpoint(run / "checkpoint.pt")["agent"]["high"]
-    apply_revision(run, _spec(tmp_path / "five.yaml", "five", FIVE, EDGES))
-    after = load_checkpoint(run / "checkpoint.pt")["agent"]["high"]
-    for net in ("q", "q_target"):       # one network for every sub-goal: nothing to add or drop
-        assert after[net].keys() == before[net].keys()
-        assert all(torch.equal(after[net][k], before[net][k]) for k in before[net])
-    old, new = before["buffer"]["data"], after["buffer"]["data"]
-    rows = np.flatnonzero([(FIVE + CORNERS)[int(g)] in FIVE for g in old["goal"][:before["buffer"]["size"]]])
-    assert after["buffer"]["size"] == len(rows) > 0
-    names = [(FIVE + CORNERS)[int(g)] for g in old["goal"][rows]]   # the transitions kept, oldest first
-    assert [FIVE[int(g)] for g in new["goal"][:len(rows)]] == names
-    kept = [(FIVE + CORNERS).index(g) for g in FIVE]
-    np.testing.assert_array_equal(np.asarray(new["available"][:len(rows)]), np.asarray(old["available"][rows][:, kept]))
-    train(RunConfig(task="keydoor_incorrect"), run, resume=True, progress=False)
-    assert load_checkpoint(run / "checkpoint.pt")["env_steps"] >= STEPS
-
-
 def test_a_critic_that_never_updated_starts_the_revised_spec_afresh_so_a_re_signed_edge_takes_its_new_sign(tmp_path):
     # the outcome likelihood learns from successes only: paused after one episode, the critic has not updated
     spec = _spec(tmp_path / "first.yaml", "first", FIVE, EDGES, likelihood={"name": "outcome"})

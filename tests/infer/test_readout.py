@@ -66,23 +66,6 @@ def test_filtered_set_given_every_possible_row_matches_a_brute_force_count():
     assert any(e != mode for e in expected) and any(brute(r.tolist()) is None for r in given)
 
 
-def test_filtered_set_falls_back_to_the_completion_where_no_sample_agrees():
-    critic = _critic()
-    samples = torch.tensor([[1, 1, 0, 0]] * 5 + [[0, 0, 1, 1]] * 3 + [[1, 0, 1, 0]] * 2, dtype=torch.float32)
-    critic._last_samples = samples
-    given = torch.tensor([[False, False, True, False],      # samples agree: their mode, as with "mode"
-                          [False, True, False, True],       # nothing agrees: q's completion of the row
-                          [False, False, False, False]])
-    out = critic.filtered_set(given=given, fallback="completion")
-    assert out[0].tolist() == [False, False, True, True] and out[2].tolist() == [True, True, False, False]
-    assert out[1].tolist() == critic.completion(given[1]).tolist()
-    assert out[1].tolist() != critic.filtered_set(given=given[1]).tolist()      # not the unconditional mode
-    assert out[1, 1] and out[1, 3]                                              # it holds what was achieved
-    assert critic.filtered_set(given=given[1], fallback="completion").tolist() == out[1].tolist()
-    with pytest.raises(ValueError, match="fallback must be one of mode, completion, conditional"):
-        critic.filtered_set(given=given, fallback="nearest")
-
-
 def test_ranking_puts_the_most_probable_configuration_first_with_its_exact_probability():
     critic = _critic(theta=(3.0, 3.0, -3.0, -3.0))
     top = critic.ranking(num_samples=3000, top_k=3)
@@ -155,83 +138,6 @@ def _random_critic(seed, n=7):
     sd["coupling"] = (torch.rand(len(edges), generator=g) * 4) * torch.tensor([float(s) for *_, s in edges])
     c.load_state_dict(sd)
     return c, g
-
-
-def _conditional_argmax(c, row):
-    """The most probable configuration holding ``row`` by enumeration of all 2^N states (log q
-    normalised), ties to the lexicographically smallest; and its log q."""
-    states = state_table(c.n).float()
-    lq = c.log_q(states).double()
-    holds = (states.bool() | ~row).all(-1)
-    top = lq[holds].max()
-    best = [tuple(s.int().tolist()) for s, v, h in zip(states, lq, holds) if h and v >= top - 1e-9]
-    return list(min(best)), float(top)
-
-
-@pytest.mark.parametrize("seed", range(8))
-def test_conditional_mode_is_the_enumerated_mode_of_q_given_the_achieved(seed):
-    c, g = _random_critic(seed)
-    given = torch.rand(6, c.n, generator=g) < 0.25
-    given[0] = False                                                 # nothing given: q's mode
-    out = c.conditional_mode(given)
-    assert out.shape == given.shape and out.dtype == torch.bool
-    for row, got in zip(given, out):
-        assert got.int().tolist() == _conditional_argmax(c, row)[0]
-    assert c.conditional_mode(given[1]).tolist() == out[1].tolist()  # (N,) in, (N,) out
-    # never below the completion's local maximum, and strictly above it somewhere over these seeds
-    lq = lambda w: c.log_q(w.float()).double()                        # noqa: E731
-    assert bool((lq(out) >= lq(c.completion(given)) - 1e-6).all())
-
-
-def test_conditional_mode_beats_the_completion_on_some_random_critics():
-    """The completion stops at the first local maximum; the conditional mode does not (2 of the 8
-    critics of the test above, seeds 0 and 3, have a row where it is strictly more probable)."""
-    differs = 0
-    for seed in range(8):
-        c, g = _random_critic(seed)
-        given = torch.rand(6, c.n, generator=g) < 0.25
-        differs += int((c.log_q(c.conditional_mode(given).float()) > c.log_q(c.completion(given).float()) + 1e-4).any())
-    assert differs >= 2
-
-
-def test_conditional_mode_above_the_enumeration_limit_searches_from_the_samples(monkeypatch):
-    import hubsgo_ppl.infer.readout as readout
-
-    monkeypatch.setattr(readout, "CONDITIONAL_EXACT_FREE", 0)      # every row takes the multi-start search
-    for seed in range(8):
-        c, g = _random_critic(seed)
-        c._last_samples = (torch.rand(16, c.n, generator=g) < 0.5).float()
-        given = torch.rand(6, c.n, generator=g) < 0.25
-        out = c.conditional_mode(given)
-        assert bool((out | ~given).all())                             # the given stay on
-        lq = c.log_q(out.float())
-        assert bool((lq >= c.log_q(c.completion(given).float()) - 1e-5).all())
-        for sample in c._last_samples.bool():                         # at least each start it ascends from
-            assert bool((lq >= c.log_q((given | sample).float()) - 1e-5).all())
-        for row, got in zip(given, out):                              # a local maximum given the row
-            maxima, _ = _local_maxima(c, row)
-            assert tuple(got.int().tolist()) in maxima
-
-
-def test_holding_a_cell_no_edge_joins_the_conditional_mode_keeps_the_route_the_completion_hides():
-    # a critic that has learned the blue route (key, door, goal) and a corner cell it pushed down
-    graph = SubgoalGraph(["yk", "yd", "bk", "bd", "goal", "corner"],
-                         [("yk", "yd", 1), ("bk", "bd", 1), ("yk", "bk", -1), ("yd", "bd", -1),
-                          ("yd", "goal", 1), ("bd", "goal", 1)])
-    c = SubgoalCritic(graph, seed=0)
-    sd = c.state_dict()
-    sd["theta"] = torch.tensor([-3.0, -3.0, -1.0, -1.0, -1.0, -3.0])
-    sd["coupling"] = torch.tensor([1.0, -2.0, -2.0, 1.0, 2.0, 2.0])    # in graph.edges order (sorted)
-    c.load_state_dict(sd)
-    names = list(graph.names)
-    corner = torch.tensor([nm == "corner" for nm in names])
-    held = lambda mask: {nm for nm, m in zip(names, mask.tolist()) if m}      # noqa: E731
-    assert held(c.completion(corner)) == {"corner"}                 # no single flip from it raises log q
-    assert held(c.conditional_mode(corner)) == {"bk", "bd", "goal", "corner"}
-    assert held(c.conditional_mode(torch.zeros(6, dtype=torch.bool))) == {"bk", "bd", "goal"}
-    c._last_samples = torch.tensor([[0, 0, 1, 1, 1, 0]] * 4, dtype=torch.float32)   # no sample holds the corner
-    assert held(c.filtered_set(given=corner, fallback="conditional")) == {"bk", "bd", "goal", "corner"}
-    assert held(c.filtered_set(given=corner, fallback="completion")) == {"corner"}
 
 
 def test_completion_of_a_key_door_prior_is_the_route_of_the_key_held():
