@@ -84,10 +84,15 @@ class CriticFilter:
     name = "critic"
 
     def __init__(self, critic: Any, outcome_window: int = 20, keep_fraction: float = 1.0,
-                 before_update: str = "g0"):
+                 before_update: str = "g0", complete_missing: bool = False):
         """The arguments are the loop's ``outcome_window``, ``filter_keep`` and ``filter_before_update``,
-        checked where they are declared (:class:`~.settings.LoopConfig`)."""
+        checked where they are declared (:class:`~.settings.LoopConfig`). ``complete_missing``: where no
+        sample holds every achieved sub-goal, Ĝt is q's completion of them instead of the unconditional
+        mode. A transferred critic sets it (experiments/transfer.py): confident of its source run's
+        route before the agent knows the new layout, its mode can name a route the agent can no longer
+        take (it holds the other route's key)."""
         self.critic = critic
+        self.complete_missing = bool(complete_missing)
         self.before_update = before_update
         self.keep_fraction = float(keep_fraction)
         self._mask: np.ndarray | None = None   # None until the first update: Ĝt = G0
@@ -113,7 +118,8 @@ class CriticFilter:
         if achieved is None:
             return self._mask | self._keep
         given = torch.as_tensor(np.asarray(achieved, dtype=bool))
-        return self.critic.filtered_set(given=given).cpu().numpy().astype(bool) | self._keep
+        mask = self.critic.filtered_set(given=given, complete_missing=self.complete_missing)
+        return mask.cpu().numpy().astype(bool) | self._keep
 
     def end_episode(self, visited: np.ndarray, success: bool) -> None:
         if not success:
@@ -164,11 +170,12 @@ class CriticFilter:
     def state_dict(self) -> dict[str, Any]:
         return {"critic": self.critic.state_dict(),
                 "mask": None if self._mask is None else torch.as_tensor(self._mask),
-                "outcomes": self.outcomes().clone()}
+                "outcomes": self.outcomes().clone(), "complete_missing": self.complete_missing}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.critic.load_state_dict(state["critic"])
         self._mask = None if state["mask"] is None else state["mask"].numpy().astype(bool)
+        self.complete_missing = bool(state.get("complete_missing", False))
         self._outcomes.clear()
         for row in state.get("outcomes", torch.zeros(0, self.critic.n)):
             self._outcomes.append(row.numpy().astype(bool))

@@ -39,8 +39,8 @@ def format_transfer(init: dict[str, Any]) -> str:
             + ", ".join(parts))
     if init.get("schedules"):
         text += "; schedules continued: " + ", ".join(f"loop.{k}={v:g}" for k, v in init["schedules"].items())
-    if init.get("defaults"):
-        text += "; transfer defaults: " + ", ".join(f"loop.{k}={v}" for k, v in init["defaults"].items())
+    if "critic" in init.get("parts", []):
+        text += "; where no critic sample holds what the agent has achieved, Ĝt completes it"
     return text
 
 

@@ -182,10 +182,10 @@ def _new(run: ResolvedRun, out: Path, cfg: RunConfig | None, started: bool, resu
                   "check the layout (a key behind its own door, a walled-in cell, a cell on lava)", file=sys.stderr)
     if not resumed:
         note_unlinked_goals(run)
-    plan = schedules = defaults = None
+    plan = schedules = None
     if cfg is not None and cfg.init_from is not None:       # every refusal before anything is written
         from ..agents.config import set_keys
-        from .transfer import TransferError, continued_schedules, plan_transfer, transfer_defaults
+        from .transfer import TransferError, continued_schedules, plan_transfer
 
         plain = run.to_dict()
         try:
@@ -194,8 +194,7 @@ def _new(run: ResolvedRun, out: Path, cfg: RunConfig | None, started: bool, resu
             raise RunError(str(exc)) from None
         user_set = set_keys(cfg.overrides, "loop")
         schedules = {} if cfg.restart_schedules else continued_schedules(plan, keep=user_set)
-        defaults = transfer_defaults(plan, keep=user_set)
-        plain["hyper"].setdefault("loop", {}).update({**schedules, **defaults})
+        plain["hyper"].setdefault("loop", {}).update(schedules)
         run = ResolvedRun.from_dict(plain)
     kept = ("config.yaml",) if resumed else ()
     removed = _tidy(out, tuple(n for n in RUN_FILES if n not in kept))
@@ -220,7 +219,7 @@ def _new(run: ResolvedRun, out: Path, cfg: RunConfig | None, started: bool, resu
             from .transfer import TransferError, apply_transfer
 
             try:
-                init = {**apply_transfer(agent, plan), "schedules": schedules, "defaults": defaults}
+                init = {**apply_transfer(agent, plan), "schedules": schedules}
             except TransferError as exc:
                 raise RunError(str(exc)) from None
             run = run.replace(init_from=init)

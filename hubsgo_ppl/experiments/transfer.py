@@ -35,7 +35,7 @@ from .remap import (TransferError, name_index, remap_critic_state, remap_high_st
 
 __all__ = ["PARTS", "SCHEDULES", "TransferError", "TransferPlan", "name_index", "remap_rows", "remap_critic_state",
            "remap_high_state", "remap_low_state", "revise_agent_state", "plan_transfer", "apply_transfer",
-           "continued_schedules", "transfer_defaults", "config_subgoals"]
+           "continued_schedules", "config_subgoals"]
 
 #: the parts of an agent ``--transfer`` names
 PARTS = ("critic", "high", "low")
@@ -191,12 +191,6 @@ def continued_schedules(plan: TransferPlan, keep: Sequence[str] = ()) -> dict[st
     return out
 
 
-def transfer_defaults(plan: TransferPlan, keep: Sequence[str] = ()) -> dict[str, Any]:
-    """``{loop key: value}`` a transfer changes besides the schedules: none (a transferred run uses the
-    loop's defaults); kept so that a run records what its transfer set."""
-    return {}
-
-
 def apply_transfer(agent: Any, plan: TransferPlan) -> dict[str, Any]:
     """Load the planned parts of the source run into ``agent`` (a freshly built loop), sub-goals matched
     by name; returns what config.yaml records under ``init_from``."""
@@ -207,7 +201,9 @@ def apply_transfer(agent: Any, plan: TransferPlan) -> dict[str, Any]:
     mapped: dict[str, Any] = {}
     if "critic" in plan.parts:
         critic, info = remap_critic_state(plan.agent["filter"]["critic"], agent.filter.critic, keep_run=False)
-        state["filter"] = {"critic": critic, "mask": None, "outcomes": torch.zeros(0, len(new_names))}
+        # a transferred critic completes what the agent holds where no sample holds it (CriticFilter)
+        state["filter"] = {"critic": critic, "mask": None, "outcomes": torch.zeros(0, len(new_names)),
+                           "complete_missing": True}
         mapped["critic"] = {"subgoals": f"{len(info['subgoals_kept'])}/{len(new_names)}",
                             "edges": f"{len(info['edges_kept'])}/{len(info['edges_kept']) + len(info['edges_new'])}",
                             "new_subgoals": info["subgoals_new"], "new_edges": info["edges_new"]}
@@ -226,6 +222,6 @@ def apply_transfer(agent: Any, plan: TransferPlan) -> dict[str, Any]:
     if "critic" in plan.parts:      # Ĝt from the transferred critic at once, not only after its first update
         f = agent.filter
         f.load_state_dict({"critic": f.critic.state_dict(), "mask": f.critic.filtered_set(),
-                           "outcomes": torch.zeros(0, len(new_names))})
+                           "outcomes": torch.zeros(0, len(new_names)), "complete_missing": True})
     return {"run": str(plan.source.resolve()), "task": plan.config["task"], "agent": plan.config["agent"],
             "env_steps": plan.env_steps, "parts": list(plan.parts), "mapped": mapped}

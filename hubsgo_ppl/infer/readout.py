@@ -52,13 +52,14 @@ class CriticReadout:
             raise RuntimeError("no update has run yet; call update() first")
         return self._last_samples.clone()
 
-    def filtered_set(self, given: torch.Tensor | None = None) -> torch.Tensor:
+    def filtered_set(self, given: torch.Tensor | None = None, complete_missing: bool = False) -> torch.Tensor:
         """Sec. 3.4: the most frequent configuration among the last update's samples, BoolTensor (N,).
 
         ``given`` (bool, (N,) or (B, N)) conditions on sub-goals already achieved: the most frequent
         configuration among the samples with ``w_i = 1`` for every given ``i``, i.e. the mode of the
         samples from q(w | w_given = 1). Where no sample agrees with a row, that row gets the
-        unconditional mode. The result has ``given``'s shape. Before the first update the samples are
+        unconditional mode, or with ``complete_missing`` q's completion of the row (:meth:`completion`: the
+        route the agent is on, where the mode names one it can no longer take). The result has ``given``'s shape. Before the first update the samples are
         the current chain states. Ties go to the lexicographically smallest configuration.
         """
         _, configs, counts = self._sample_counts()
@@ -73,7 +74,10 @@ class CriticReadout:
         best = torch.where(agree, counts[None], torch.zeros_like(counts)[None]).argmax(-1)
         missing = ~agree.any(-1)
         best = torch.where(missing, torch.full_like(best, mode), best)
-        return configs[best].bool().reshape(given.shape)
+        out = configs[best].bool()
+        if complete_missing and missing.any():
+            out[missing] = self.completion(rows[missing]).bool()
+        return out.reshape(given.shape)
 
     def _given_rows(self, given) -> torch.Tensor:
         """``given`` as a bool tensor of shape (N,) or (B, N); any other shape is refused."""

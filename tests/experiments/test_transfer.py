@@ -167,7 +167,22 @@ def test_a_transfer_changes_no_loop_setting_but_the_schedules_it_continues(tmp_p
     starts = {"filter_start", "explore_start", "low_explore_start"}
     assert {k for k in moved if moved[k] != scratch.get(k)} <= starts
     assert {k: v for k, v in moved.items() if k not in starts} == {k: v for k, v in scratch.items() if k not in starts}
-    assert yaml.safe_load((tmp_path / "all" / "config.yaml").read_text())["init_from"]["defaults"] == {}
+    assert "defaults" not in yaml.safe_load((tmp_path / "all" / "config.yaml").read_text())["init_from"]
+
+
+def test_a_transferred_critic_completes_what_the_agent_holds_and_keeps_doing_so_after_resume(tmp_path):
+    """The transferred critic's Ĝt falls back to q's completion of the achieved set (not the mode of a
+    route the agent can no longer take); a run from scratch keeps the mode; a checkpoint keeps it."""
+    from hubsgo_ppl.experiments.run import load_run
+
+    src = tmp_path / "src"
+    train(RunConfig(task="keydoor", steps=3000, seed=0, overrides=TINY), src, progress=False, stop_at=300)
+    train(RunConfig(task="keydoor_moved", overrides=TINY, init_from=str(src), steps=3000), tmp_path / "moved",
+          progress=False, stop_at=300)
+    train(RunConfig(task="keydoor_moved", overrides=TINY, steps=3000), tmp_path / "scratch", progress=False,
+          stop_at=300)
+    assert load_run(tmp_path / "moved")[2].filter.complete_missing is True
+    assert load_run(tmp_path / "scratch")[2].filter.complete_missing is False
 
 
 def test_grids_of_another_size_with_an_observation_of_the_same_length_are_refused(tmp_path, capsys):

@@ -42,6 +42,18 @@ def test_filtered_set_is_the_mode_of_the_samples_that_agree_with_the_given():
         critic.filtered_set(given=torch.zeros(3, dtype=torch.bool))
 
 
+def test_complete_missing_gives_rows_no_sample_agrees_with_their_completion_and_leaves_the_rest():
+    critic = _critic()
+    critic._last_samples = torch.tensor([[1, 1, 0, 0]] * 5 + [[0, 0, 1, 1]] * 3, dtype=torch.float32)
+    given = torch.tensor([[False, False, True, False],      # a sample agrees: the mode among those
+                          [False, True, False, True]])      # none does: q's completion of the row
+    out = critic.filtered_set(given=given, complete_missing=True)
+    assert out[0].tolist() == [False, False, True, True]
+    assert out[1].tolist() == critic.completion(given[1]).tolist()
+    assert out[1].tolist() != [True, True, False, False]     # not the unconditional mode: b2 is held
+    assert bool(out[1][1]) and bool(out[1][3])
+
+
 def test_filtered_set_given_every_possible_row_matches_a_brute_force_count():
     critic = _critic()
     g = torch.Generator().manual_seed(3)
