@@ -389,26 +389,3 @@ def test_the_loop_logs_every_option_with_its_start_and_outcome():
         assert all(0 < o["steps"] <= 6 for o in stats.option_log)
         assert not any(o["goal"] in o["from"] for o in stats.option_log)     # achieved sub-goals are not offered
         assert "option_log" not in stats.row()
-
-
-def _choices(extra, episodes=12):
-    """(allowed set, possible set, stored available set) at every high-level choice of a few episodes
-    of h-DQN on KeyDoor, whose keys sit next to the start: the agent picks one up early and often."""
-    loop = _loop(steps=4000, extra=["env.max_steps=200", *extra])
-    env = loop.env.unwrapped
-    seen, stored = [], []
-    select, store = loop.high.select, loop.high.store
-
-    def recording_select(obs, allowed, eps):
-        seen.append((allowed.copy(), env.subgoal_possible() & ~env.subgoal_achieved()))
-        return select(obs, allowed, eps)
-
-    def recording_store(s0, g, r, obs, discount, available):
-        stored.append((available.copy(), env.subgoal_possible() & ~env.subgoal_achieved()))
-        return store(s0, g, r, obs, discount, available)
-
-    loop.high.select, loop.high.store = recording_select, recording_store
-    for _ in range(episodes):
-        loop.run_episode()
-    return seen, stored
-

@@ -15,7 +15,7 @@ import measure_transfer  # noqa: E402
 
 
 def test_an_out_folder_records_its_settings_and_refuses_others(tmp_path):
-    settings = {"steps": 15_000, "overrides": ["loop.filter_fallback=mode"], "threshold": 0.2, "keep_linked": False}
+    settings = {"steps": 15_000, "overrides": ["loop.filter_keep=0"], "threshold": 0.2, "keep_linked": False}
     measure_common.guard_settings(tmp_path, "measure_revise", settings)
     recorded = json.loads((tmp_path / measure_common.SETTINGS).read_text())
     assert recorded == {"script": "measure_revise", **settings}
@@ -25,7 +25,7 @@ def test_an_out_folder_records_its_settings_and_refuses_others(tmp_path):
         measure_common.guard_settings(tmp_path, "measure_revise", other)
     msg = str(err.value)
     assert "\n" not in msg
-    assert "--steps 15000 --set loop.filter_fallback=mode --threshold 0.2" in msg
+    assert "--steps 15000 --set loop.filter_keep=0 --threshold 0.2" in msg
     assert msg.endswith("not --steps 15000 --threshold 0.2 --keep-linked; re-run with those settings or choose another --out")
     assert json.loads((tmp_path / measure_common.SETTINGS).read_text()) == recorded      # left as it was
     with pytest.raises(measure_common.SettingsMismatch, match="measure_transfer: .* holds runs made with"):

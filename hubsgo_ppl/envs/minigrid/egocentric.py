@@ -105,30 +105,3 @@ def potential(env: Any) -> Callable[[torch.Tensor], torch.Tensor]:
         return -(obs[..., cols].abs() + obs[..., cols + 1].abs()) * scale
 
     return phi
-
-
-def features(env: Any) -> Callable[[torch.Tensor], torch.Tensor]:
-    """feat(obs) -> (..., N, F) for egocentric observations: sub-goal i's row is what the agent sees
-    and holds (carrying, every landmark's achievement flag, the window) followed by i's own achievement
-    flag, the offset to i's target and i's kind (at or goal, carrying, door open, one-hot). The other
-    sub-goals' offsets are left out and nothing names i, so one network serves every sub-goal.
-    ``feat.dim`` is F; ``feat.flag`` the column of a row's own achievement flag."""
-    import torch
-
-    preds = env._preds
-    marks = [p.name for p in env.spec_maze.landmarks]
-    n = len(marks)
-    mark = torch.tensor([marks.index(name) for name in env.subgoal_names])
-    shared = torch.cat([torch.arange(0, 1 + n), torch.arange(1 + 3 * n, env._ego_dim)])
-    own = torch.stack([1 + mark, 1 + n + 2 * mark, 2 + n + 2 * mark], dim=1)       # (N, 3)
-    kind = torch.zeros(len(preds), 3)
-    kind[torch.arange(len(preds)), torch.tensor([code for code, _, _ in preds])] = 1.0
-    n_goals = len(preds)
-
-    def feat(obs: torch.Tensor) -> torch.Tensor:
-        base = obs[..., shared].unsqueeze(-2).expand(*obs.shape[:-1], n_goals, shared.numel())
-        return torch.cat([base, obs[..., own], kind.expand(*obs.shape[:-1], n_goals, 3)], dim=-1)
-
-    feat.dim = int(shared.numel()) + 6
-    feat.flag = int(shared.numel())     # the column of a row's own achievement flag
-    return feat

@@ -322,18 +322,6 @@ class MazeEnv(MiniGridEnv):
 
         return phi
 
-    def subgoal_features(self):
-        """feat(obs) -> (..., N, F): what a goal-conditioned low level reads for each sub-goal, or None
-        where the observation names absolute cells (symbolic and image).
-
-        From an egocentric observation, sub-goal i's row is what the agent sees and holds (carrying,
-        every landmark's achievement flag, the window) followed by i's own achievement flag, the offset
-        to i's target and i's kind (at or goal, carrying, door open, one-hot). The other sub-goals'
-        offsets are left out and nothing names i, so one network serves every sub-goal: a step towards
-        the target's offset means the same for a key as for a door, on this layout or a moved one.
-        """
-        return egocentric.features(self) if self.obs_mode == "egocentric" else None
-
     def symbolic_state(self) -> MazeState:
         """The hashable full state (position, direction, carried object, object cells, door states)."""
         carrying = -1

@@ -149,32 +149,3 @@ def test_egocentric_potential_equals_the_symbolic_one(task):
             oe, _ = ego.reset(seed=2)
             os_, _ = sym.reset(seed=2)
     assert compared > 100
-
-
-def test_each_subgoal_row_holds_its_own_flag_offset_and_kind_and_nothing_else_of_it():
-    full = make("keydoor_incorrect", obs_mode="egocentric")
-    sub = make_subset("keydoor_incorrect", ["goal", "blue_door", "yellow_key"], obs_mode="egocentric")
-    assert make("keydoor").unwrapped.subgoal_features() is None         # symbolic cells name the layout
-    f_full, f_sub = full.unwrapped.subgoal_features(), sub.unwrapped.subgoal_features()
-    names = full.unwrapped.subgoal_names
-    kinds = {"yellow_key": 1, "blue_key": 1, "yellow_door": 2, "blue_door": 2, "goal": 0}
-    n = len(names)
-    assert f_full.dim == f_sub.dim == 1 + n + 2 * VIEW * VIEW + 6
-    obs, _ = full.reset(seed=3)
-    rng = np.random.default_rng(3)
-    for _ in range(150):
-        carry, achieved, offsets, window = _split(obs, n)
-        rows = f_full(torch.as_tensor(obs)).numpy()
-        assert rows.shape == (n, f_full.dim)
-        for i, name in enumerate(names):
-            shared, own, kind = rows[i, :-6], rows[i, -6:-3], rows[i, -3:]
-            np.testing.assert_array_equal(shared, np.concatenate([[carry], achieved, window.reshape(-1)]))
-            np.testing.assert_array_equal(own, [achieved[i], *offsets[i]])
-            assert rows[i, f_full.flag] == achieved[i]
-            assert kind.tolist() == [float(k == kinds.get(name, 0)) for k in range(3)]
-        # a subset's rows are the full catalogue's rows of the same names, in the subset's order
-        order = [names.index(s) for s in sub.unwrapped.subgoal_names]
-        np.testing.assert_array_equal(f_sub(torch.as_tensor(obs)[None])[0].numpy(), rows[order])
-        obs, _, t, u, _ = full.step(int(rng.integers(5)))
-        if t or u:
-            obs, _ = full.reset(seed=4)
