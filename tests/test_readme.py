@@ -36,6 +36,10 @@ def test_the_python_training_snippet_runs_and_writes_g_star(tmp_path, monkeypatc
     g_star = json.loads((tmp_path / "runs" / "py-keydoor" / "subgoals.json").read_text())
     assert g_star["ranking"][0]["subgoals"] == scope["g_star"][0]["subgoals"]
     assert str(scope["g_star"][0]["subgoals"]) in capsys.readouterr().out
+    import csv                      # the user's callback saw the episodes metrics.csv logs
+    rows = list(csv.DictReader(open(tmp_path / "runs" / "py-keydoor" / "metrics.csv")))
+    wins = [int(float(r["env_steps"])) for r in rows if int(float(r["success"])) == 1]
+    assert getattr(scope["first"], "step", None) == (wins[0] if wins else None)
 
 
 def test_the_critic_snippet_learns_the_route_of_its_successes(tmp_path, monkeypatch):
