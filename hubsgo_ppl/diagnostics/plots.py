@@ -36,6 +36,7 @@ from typing import Any
 import matplotlib
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 
 from hubsgo_ppl.diagnostics.arviz import _check_names, _to_numpy, atomic_write, az, summary
 from hubsgo_ppl.diagnostics.mrf_figure import (DPI, NEGATIVE_COLOR, POSITIVE_COLOR, ZERO_COLOR, edge_styles,

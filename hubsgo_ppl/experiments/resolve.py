@@ -77,8 +77,6 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
 def resolve_run(cfg: RunConfig) -> ResolvedRun:
     """Everything a run needs, typed (:class:`ResolvedRun`)."""
     info = get_task(cfg.task)
-    if cfg.steps is not None and cfg.steps <= 0:
-        raise RunError(f"--steps must be positive, got {cfg.steps}")
     if int(cfg.checkpoint_steps) <= 0:
         raise RunError(f"checkpoint_steps must be a positive number of env steps, got {cfg.checkpoint_steps}")
     for name in ("history_every", "threads"):

@@ -136,5 +136,5 @@ def test_a_zero_budget_is_refused_the_same_way_by_either_flag(tmp_path, capsys, 
     out = tmp_path / "run"
     capsys.readouterr()
     assert main(["train", "keydoor", "--out", str(out), "--no-progress", *flag]) == 2
-    assert "--steps must be positive, got 0" in _one_line(capsys)
+    assert "steps takes an integer >= 1 (default 40000), got 0" in _one_line(capsys)   # one check, one line
     assert not out.exists()
