@@ -55,6 +55,7 @@ from typing import Any
 
 from ..envs import get_task
 from ..envs.subset import catalogue_order, check_subset
+from .lock import run_folder_lock
 from .io import truncate_csv, write_json, write_text, write_yaml
 from .run import (EPISODE_LOGS, REVISIONS_CSV, RunConfig, RunError, _build, _save,
                   note_unlinked_goals, plot_run_curve, run_config, run_dir_checkpoint, subgoal_table, train,
@@ -142,7 +143,11 @@ def apply_revision(run_dir: str | Path, new_spec: str | Path, steps: int | None 
     it, unless nothing is to be trained after (``train_after`` False, ``steps`` None): the run then stays
     finished, and its subgoals.json is rewritten with the revised critic's G*, read from the same recent
     successes (``record["finished"]``)."""
-    run_dir = Path(run_dir)
+    with run_folder_lock(run_dir):     # no train or other revision writes the folder meanwhile
+        return _apply_revision(Path(run_dir), new_spec, steps, train_after)
+
+
+def _apply_revision(run_dir: Path, new_spec: str | Path, steps: int | None, train_after: bool) -> dict[str, Any]:
     ckpt = run_dir_checkpoint(run_dir)
     old = ckpt["config"]
     if old.get("agent") != "hubsgo" or "model_spec" not in old:

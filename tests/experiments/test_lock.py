@@ -77,3 +77,26 @@ def test_a_folder_the_lock_created_goes_when_nothing_was_written(tmp_path):
     with run_folder_lock(out) as created:
         assert created and (out / LOCK_FILE).is_file()
     assert not out.exists() and out.parent.is_dir()
+
+
+def test_a_revision_of_a_run_another_process_writes_is_refused_and_changes_nothing(tmp_path, capsys):
+    """`hubsgo revise` takes the same lock as `train`: while a process holds it, the revision is refused
+    in one line and neither the checkpoint nor config.yaml changes."""
+    out = tmp_path / "run"
+    assert main(_args(0) + ["--out", str(out)]) == 0
+    before = {name: (out / name).read_bytes() for name in ("checkpoint.pt", "config.yaml")}
+    marker = tmp_path / "held"
+    proc = subprocess.Popen([sys.executable, "-c", HOLD, str(out), str(marker)])
+    try:
+        deadline = time.monotonic() + 60
+        while not marker.exists():
+            assert proc.poll() is None and time.monotonic() < deadline
+            time.sleep(0.05)
+        capsys.readouterr()
+        assert main(["revise", str(out), "--model", "keydoor-independent", "--steps", "600", "--no-progress"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "another process is writing this run folder" in err[0], err
+    finally:
+        proc.kill()
+        proc.wait(timeout=30)
+    assert {name: (out / name).read_bytes() for name in before} == before
