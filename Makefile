@@ -7,7 +7,8 @@ PIP := $(BIN)/python -m pip
 EXTRAS ?= robosuite,ray,notebooks,dev
 STAMP := $(VENV)/.installed
 # Notebooks run through nbmake here; the `notebooks`-marked test (a subprocess run of the same) is deselected.
-PYTEST_ARGS ?= -m "not slow and not notebooks" --nbmake --nbmake-timeout=600 tests notebooks
+# Two test workers (pytest-xdist), one per core of the CI machine.
+PYTEST_ARGS ?= -n 2 -m "not slow and not notebooks" --nbmake --nbmake-timeout=600 tests notebooks
 
 .PHONY: install demo test test-all bench clean
 

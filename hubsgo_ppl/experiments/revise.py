@@ -55,6 +55,7 @@ from typing import Any
 
 from ..envs import get_task
 from ..envs.subset import catalogue_order, check_subset
+from .checkpoint import CHECKPOINT
 from .lock import run_folder_lock
 from .io import truncate_csv, write_json, write_text, write_yaml
 from .run import (EPISODE_LOGS, REVISIONS_CSV, RunConfig, RunError, _build, _save,
@@ -143,6 +144,8 @@ def apply_revision(run_dir: str | Path, new_spec: str | Path, steps: int | None 
     it, unless nothing is to be trained after (``train_after`` False, ``steps`` None): the run then stays
     finished, and its subgoals.json is rewritten with the revised critic's G*, read from the same recent
     successes (``record["finished"]``)."""
+    if not (Path(run_dir) / CHECKPOINT).is_file():     # refused before the lock creates anything
+        run_dir_checkpoint(Path(run_dir))
     with run_folder_lock(run_dir):     # no train or other revision writes the folder meanwhile
         return _apply_revision(Path(run_dir), new_spec, steps, train_after)
 
