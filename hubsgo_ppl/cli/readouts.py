@@ -89,7 +89,7 @@ def cmd_review(args: argparse.Namespace) -> int:
                else "not settled yet")
     print(f"review of {r['run_dir']} ({r['task']}, {r['model']}) at env step {r['env_steps']:,} "
           f"(episode {r['episodes']}; {settled})")
-    print(f"G*: {{{', '.join(g['subgoals'])}}}  P={g['prob']:.3f}{tie}")
+    print(f"G*: {{{', '.join(g['subgoals'])}}}  P(sample)={g['prob']:.3f}{tie}")
     print("marginals P(w=1): " + ", ".join(f"{n}={p:.2f}" for n, p in r["marginals"].items()))
     t = r["trend"]
     if t["delta"] is not None:
@@ -98,14 +98,14 @@ def cmd_review(args: argparse.Namespace) -> int:
               + ", ".join(f"{n} {d}" for n, d in zip(t["delta"], signed)))
     flagged = [f"{c['u']}--{c['v']} (you: {c['human']}, J={c['J']:+.2f})" for c in r["flagged_edges"]]
     print(f"flagged edges (learned sign contradicts yours): {'; '.join(flagged) or 'none'}")
-    drops = [f"{d['name']} (P={d['marginal']:.2f})" for d in r["suggested_drops"]]
+    drops = [f"{d['name']} (P(w=1)={d['marginal']:.2f})" for d in r["suggested_drops"]]
     prior_only = (" (the critic has not updated on this run yet: its starting values, not what this run learned)"
                   if drops and not r.get("critic_updates", 1) else "")
     print(f"suggested drops (P(w=1) < {r['threshold']:.2f}): {', '.join(drops) or 'none'}{prior_only}")
     held = [f"{d['name']} ({d['success_frequency']:.0%}; edges to {', '.join(d['positive_edges']) or 'none'})"
             for d in r["held_by_edges"]]
     print(f"in G*, held by your positive edges, skipped by most successes: {'; '.join(held) or 'none'}")
-    up = [f"{d['name']} (P={d['marginal']:.2f}, {d['success_frequency']:.0%}; edges to {', '.join(d['positive_edges'])})"
+    up = [f"{d['name']} (P(w=1)={d['marginal']:.2f}, {d['success_frequency']:.0%}; edges to {', '.join(d['positive_edges'])})"
           for d in r.get("held_up_by_edges", [])]
     if up:
         print(f"outside G*, held up by your positive edges, skipped by most successes: {'; '.join(up)}")
