@@ -163,4 +163,11 @@ def build_parser() -> argparse.ArgumentParser:
     k.add_argument("task", nargs="*", help="tasks or catalogue .yaml files to check (default: list every task)")
     k.add_argument("--model", help="a critic spec to check against the tasks given")
     k.set_defaults(func=tasks.cmd_tasks)
+
+    c = sub.add_parser("check-env", help="check that an environment meets the sub-goal contract HUBS-GO trains on "
+                                         "(one line per missing part and how to add it; exit 1 if any)")
+    c.add_argument("env", help="a task (see `hubsgo tasks`), a catalogue .yaml, or a registered Gymnasium id")
+    c.add_argument("--steps", type=int, default=50, help="random steps of each of the two seeded rollouts (default 50)")
+    c.add_argument("--seed", type=_seed, default=0, help="seed of the resets and the random actions (default 0)")
+    c.set_defaults(func=tasks.cmd_check_env)
     return p

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-__all__ = ["cmd_tasks"]
+__all__ = ["cmd_tasks", "cmd_check_env"]
 
 
 def cmd_tasks(args: argparse.Namespace) -> int:
@@ -63,3 +63,35 @@ def _check_task(name: str, info: Any, model: str | None) -> None:
           f"{spec['prior']['name']}, likelihood {spec['likelihood']['name']}: valid for this task")
     warn_goals_left_out(resolved["model"], resolved["task_ref"], left)      # as `hubsgo train` says them
     note_unlinked_goals(resolved)
+
+
+def cmd_check_env(args: argparse.Namespace) -> int:
+    """``hubsgo check-env ENV``: :func:`hubsgo_ppl.envs.check.check_env` on a task, a catalogue or a
+    registered Gymnasium id; prints what is missing, one line each, then the optional parts."""
+    import gymnasium as gym
+
+    from ..envs import UnknownTaskError, make
+    from ..envs.check import check_env, env_notes
+    from ..experiments.run import RunError
+
+    if args.steps < 1:
+        raise RunError(f"--steps must be a positive number of steps, got {args.steps}")
+    try:
+        env = make(args.env)
+    except UnknownTaskError as unknown:
+        try:
+            env = gym.make(args.env)
+        except gym.error.Error:
+            raise unknown from None
+    try:
+        problems = check_env(env, steps=args.steps, seed=args.seed)
+        notes = env_notes(env) if not problems else []
+    finally:
+        env.close()
+    for problem in problems:
+        print(f"missing: {problem}")
+    for note in notes:
+        print(f"note: {note}")
+    if not problems:
+        print(f"{args.env}: meets the sub-goal contract ({args.steps} steps, seed {args.seed})")
+    return 1 if problems else 0

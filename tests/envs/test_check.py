@@ -1,0 +1,98 @@
+"""The sub-goal contract checker (hubsgo_ppl/envs/check.py, `hubsgo check-env`)."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from hubsgo_ppl.cli import main
+from hubsgo_ppl.envs import make, tasks
+from hubsgo_ppl.envs.check import check_env, env_notes
+
+
+class Corridor(gym.Env):
+    """A 1-D corridor with two switches; ``broken`` names the part of the contract it breaks."""
+
+    subgoal_names = ["switch_a", "goal"]
+
+    def __init__(self, broken: str = ""):
+        self.broken = broken
+        dtype = np.float64 if broken == "dtype" else np.float32
+        self.observation_space = gym.spaces.Box(0.0, 10.0, (1,), dtype)
+        self.action_space = gym.spaces.Discrete(2)
+        self.pos = 0
+
+    def _obs(self):
+        return np.array([self.pos], dtype=self.observation_space.dtype)
+
+    def _info(self):
+        flags = np.array([self.pos >= 3, self.pos >= 6], dtype=bool)
+        if self.broken == "length":
+            flags = flags[:1]
+        info = {"subgoals": flags, "is_success": bool(self.pos >= 6)}
+        if self.broken == "success":
+            info.pop("is_success")
+        return info
+
+    def reset(self, seed=None, options=None):
+        super().reset(seed=seed)
+        # the broken version draws from numpy's global generator, which reset(seed) does not set
+        self.pos = int(np.random.randint(3)) if self.broken == "global_rng" else int(self.np_random.integers(3))
+        return self._obs(), self._info()
+
+    def step(self, action):
+        self.pos = min(max(self.pos + (1 if action == 1 else -1), 0), 6)
+        return self._obs(), float(self.pos >= 6), self.pos >= 6, False, self._info()
+
+
+def test_every_shipped_maze_meets_the_contract():
+    mazes = [name for name, info in tasks().items() if info.family == "minigrid"]
+    assert len(mazes) >= 20
+    for name in mazes:
+        env = make(name)
+        assert check_env(env, steps=30) == [], name
+        assert env_notes(env) == [], name       # shaping and the scripted low level both work on a maze
+
+
+@pytest.mark.mujoco
+def test_an_arm_task_meets_the_contract_and_is_noted_to_have_no_shaping():
+    env = make("push_any_one")
+    try:
+        assert check_env(env, steps=10) == []
+        assert [n.split("(")[0] for n in env_notes(env)] == ["no subgoal_potential"]
+    finally:
+        env.close()
+
+
+def test_a_corridor_that_meets_the_contract_passes():
+    assert check_env(Corridor()) == []
+
+
+@pytest.mark.parametrize("broken, what", [
+    ("dtype", ["observation_space"]),
+    ("length", ['info["subgoals"] after reset', 'info["subgoals"] after step']),
+    ("success", ['info["is_success"] after reset', 'info["is_success"] after step']),
+    ("global_rng", ["reset(seed=...)"]),
+])
+def test_each_broken_part_is_named_once_and_nothing_else(broken, what):
+    np.random.seed(0)       # the broken reset reads the global generator; two rollouts must still differ
+    problems = check_env(Corridor(broken), steps=20)
+    assert [p.what for p in problems] == what
+
+
+def test_a_plain_gymnasium_env_lacks_the_names_and_both_info_keys():
+    problems = check_env(gym.make("CartPole-v1"), steps=5)
+    assert [p.what for p in problems] == ["unwrapped.subgoal_names", 'info["subgoals"] after reset',
+                                          'info["is_success"] after reset', 'info["subgoals"] after step',
+                                          'info["is_success"] after step']
+    assert all(p.fix and "\n" not in str(p) for p in problems)
+
+
+def test_the_cli_passes_a_task_fails_a_plain_env_and_refuses_an_unknown_one(capsys):
+    assert main(["check-env", "keydoor", "--steps", "20"]) == 0
+    assert "meets the sub-goal contract" in capsys.readouterr().out
+    assert main(["check-env", "CartPole-v1", "--steps", "5"]) == 1
+    out = capsys.readouterr().out.strip().splitlines()
+    assert len(out) == 5 and all(line.startswith("missing: ") for line in out)
+    assert main(["check-env", "no_such_env"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "unknown task 'no_such_env'" in err[0]
