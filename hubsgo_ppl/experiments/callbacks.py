@@ -1,4 +1,4 @@
-"""Callbacks of the training driver (:func:`~hubsgo_ppl.experiments.train.train`), after Stable-Baselines3's
+"""Callbacks of the training driver (:func:`~hubsgo_ppl.experiments.driver.train`), after Stable-Baselines3's
 ``BaseCallback`` and ``CallbackList``.
 
 The driver plays the agent's training chunks (one episode each for the hierarchical agents), logs each
@@ -177,7 +177,7 @@ class CriticHistoryCallback(Callback):
 
     def _write(self, episode: int, env_steps: int, critic: str, marginals: Iterable[float]) -> None:
         self.history.write({"episode": episode, "env_steps": env_steps, "critic": critic,
-                            **{n: round(float(m), 5) for n, m in zip(self.names, marginals)}}, env_steps)
+                            **{n: round(float(m), 5) for n, m in zip(self.names, marginals)}}, step=env_steps)
 
     def on_episode(self, run: TrainingRun, stats: Any) -> None:
         if self.active and stats.episode % run.config.history_every == 0:

@@ -95,9 +95,6 @@ def resolve_run(cfg: RunConfig) -> ResolvedRun:
         if not (cfg.overrides or isinstance(exc, ConfigError)):
             raise
         raise RunError(str(exc)) from None
-    budget = hyper.get("steps")
-    if isinstance(budget, bool) or not isinstance(budget, int) or budget <= 0:    # --set steps=0 as --steps 0
-        raise RunError(f"--steps must be positive, got {budget!r} (from --set steps=...)")
     ref = task_ref(cfg.task)
     resolved: dict[str, Any] = {
         "task": info.name, "task_ref": ref, "family": info.family,

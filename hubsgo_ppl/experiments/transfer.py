@@ -221,7 +221,6 @@ def apply_transfer(agent: Any, plan: TransferPlan) -> dict[str, Any]:
         raise TransferError(f"--init-from {plan.source}: its networks do not fit this run ({exc})") from None
     if "critic" in plan.parts:      # Ĝt from the transferred critic at once, not only after its first update
         f = agent.filter
-        f.load_state_dict({"critic": f.critic.state_dict(), "mask": f.critic.filtered_set(),
-                           "outcomes": torch.zeros(0, len(new_names)), "complete_missing": True})
+        f.load_state_dict({**f.state_dict(), "mask": f.critic.filtered_set()})
     return {"run": str(plan.source.resolve()), "task": plan.config["task"], "agent": plan.config["agent"],
             "env_steps": plan.env_steps, "parts": list(plan.parts), "mapped": mapped}
