@@ -78,7 +78,8 @@ def test_every_relative_link_of_the_readme_and_docs_exists():
                 assert (page.parent / target).exists(), f"{page.relative_to(ROOT)} links to a missing {target}"
 
 
-@pytest.mark.parametrize("page", [README, *sorted((ROOT / "docs").glob("*.md")), ROOT / "notebooks" / "README.md"],
+@pytest.mark.parametrize("page", [README, *sorted((ROOT / "docs").glob("*.md")), ROOT / "notebooks" / "README.md",
+                                  *sorted((ROOT / "sweeps").glob("*.yaml"))],
                          ids=lambda p: str(p.relative_to(ROOT)))
 def test_no_page_cites_a_commit(page):
     text = page.read_text(encoding="utf-8")
