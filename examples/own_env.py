@@ -31,8 +31,8 @@ def main(argv: list[str] | None = None) -> dict:
     summary = train_env(make_corridor, {"switch_a": {"fn": switch_on, "which": "a"},
                                         "switch_b": {"fn": switch_on, "which": "b"},
                                         "goal": {"kind": "goal"}},
-                        model=SPEC, out=args.out, steps=args.steps, seed=args.seed, max_episode_steps=60,
-                        overrides=args.overrides)
+                        model=SPEC, out=args.out, task="corridor", steps=args.steps, seed=args.seed,
+                        max_episode_steps=60, overrides=args.overrides)
     top = json.loads((Path(args.out) / "subgoals.json").read_text())["ranking"][0]
     print(f"{summary['episodes']} episodes, {summary['env_steps']} env steps; G*: {top['subgoals']} at "
           f"P(sample) {top['prob']:.2f}")
