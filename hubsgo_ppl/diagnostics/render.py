@@ -21,7 +21,8 @@ step, the current sub-goal and Ĝt.
 
 A Gymnasium env of one's own (family ``gym``, docs/own_env.md) is drawn from its own ``rgb_array``
 frames (built with ``render_mode="rgb_array"``), with the caption and without target cells. Only
-these and hierarchical agents (hubsgo, hdqn) can be drawn; other runs are refused with one line. Frames are recorded by a wrapper around the run's env (``FrameRecorder``) and
+these and hierarchical agents (hubsgo, hdqn) can be drawn; other runs are refused with one line.
+Frames are recorded by a wrapper around the run's env (``FrameRecorder``) and
 the chosen sub-goals by wrapping the high level's ``select`` for the one episode; the agent itself is
 not changed. The GIF is written with Pillow, atomically.
 """
@@ -66,8 +67,7 @@ def check_renderable(resolved: dict[str, Any], what: str = "render") -> None:
 
     family, task = resolved.get("family"), resolved.get("task", "?")
     if family not in ("minigrid", "gym"):
-        raise RunError(f"{what} supports MiniGrid mazes and Gymnasium envs of one's own; task {task!r} is a "
-                       f"{family or 'non-maze'} task")
+        raise RunError(f"{what} supports MiniGrid mazes; task {task!r} is a {family or 'non-maze'} task")
     agent = resolved.get("agent")
     if agent not in HIERARCHICAL:
         raise RunError(f"{what} draws the sub-goals of hierarchical agents ({', '.join(HIERARCHICAL)}); "
