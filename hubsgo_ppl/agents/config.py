@@ -42,6 +42,10 @@ def section_classes(agent: str, family: str, low_level: str) -> dict[str, type]:
                ("robosuite", "scripted"): ScriptedOSCConfig}.get((family, low_level), GoalTD3Config)
         return {"loop": LoopConfig, "high": HighLevelConfig, "low": low}
     if agent == "hiro":
+        if family == "gym":
+            raise ConfigError("agent hiro sets goals in a space it knows (a maze cell, an arm's position), which a "
+                              "Gymnasium env of one's own does not declare; use hubsgo, hdqn or a flat baseline",
+                              None, "agent")
         return {"hiro": HIROConfig}
     return {}
 

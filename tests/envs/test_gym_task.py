@@ -134,3 +134,5 @@ def test_a_gym_catalogue_is_a_task_and_a_scripted_low_level_is_refused(tmp_path,
     assert hyper["low_level"] == "learned" and hyper["low"].get("shaping", 0.0) == 0.0
     with pytest.raises(ConfigError, match="has no scripted low level"):
         resolve_hyper("gym", "corridor", "hubsgo", low_level="scripted")
+    with pytest.raises(ConfigError, match="agent hiro sets goals in a space it knows"):
+        resolve_hyper("gym", "corridor", "hiro")
