@@ -201,8 +201,9 @@ class GymTask(gym.Env):
         self.env = _build(options, source, kwargs)
         try:
             if not isinstance(self.env.action_space, gym.spaces.Discrete):
-                raise SpecError(f"{source}: the env's action space is {self.env.action_space}; family gym trains on "
-                                "a Discrete action space (the low level of HUBS-GO and h-DQN is a goal-conditioned DQN)")
+                raise SpecError(f"{source}: the env's action space is {self.env.action_space}; family gym trains "
+                                "on a Discrete action space (the low level of HUBS-GO and h-DQN is a goal-conditioned "
+                                "DQN)")
             self._space = self.env.observation_space
             flat = _flat_space(self._space, source)
         except BaseException:
