@@ -16,9 +16,10 @@ from corridor_env import make_corridor, switch_on
 
 from hubsgo_ppl.experiments import train_env
 
-# the critic spec: the human knows a switch opens the goal, not which one
+# the critic spec: the human knows that one switch opens the goal, not which one
 SPEC = {"name": "corridor-specific", "subgoals": ["switch_a", "switch_b", "goal"],
-        "edges": [["switch_a", "goal", "positive"], ["switch_b", "goal", "positive"]]}
+        "edges": [["switch_a", "goal", "positive"], ["switch_b", "goal", "positive"],
+                  ["switch_a", "switch_b", "negative"]]}
 
 
 def main(argv: list[str] | None = None) -> dict:
