@@ -34,10 +34,18 @@ def make_config(section: str, cls: type[Settings], values: dict[str, Any], **der
 def section_classes(agent: str, family: str, low_level: str) -> dict[str, type]:
     """``{section: runtime settings class}`` of the sections ``agent`` reads (others it ignores)."""
     if agent in HIERARCHICAL:
+        if family == "gym" and low_level == "scripted":
+            raise ConfigError("low_level: a Gymnasium env of one's own has no scripted low level; use "
+                              "--low-level learned", None, "low_level")
         low = {("minigrid", "scripted"): ScriptedMazeConfig, ("minigrid", "learned"): GoalDQNConfig,
+               ("gym", "learned"): GoalDQNConfig,
                ("robosuite", "scripted"): ScriptedOSCConfig}.get((family, low_level), GoalTD3Config)
         return {"loop": LoopConfig, "high": HighLevelConfig, "low": low}
     if agent == "hiro":
+        if family == "gym":
+            raise ConfigError("agent hiro sets goals in a space it knows (a maze cell, an arm's position), which a "
+                              "Gymnasium env of one's own does not declare; use hubsgo, hdqn or a flat baseline",
+                              None, "agent")
         return {"hiro": HIROConfig}
     return {}
 

@@ -60,6 +60,12 @@ FAMILIES: dict[str, FamilyDefaults] = {
                      "train_freq": 1, "gamma": 0.99, "noise_sigma": 0.1, "policy_kwargs": {"net_arch": [256, 256]}}}),
 }
 
+# Any Gymnasium env with discrete actions (envs/gym_task.py): the mazes' loop, high level and flat
+# baselines, and their learned low level without shaping, which needs a potential a user's env lacks
+FAMILIES["gym"] = FamilyDefaults(
+    steps=40_000, low_level="learned", loop=LoopConfig.minigrid(), high=HighLevelConfig.minigrid(),
+    low=GoalDQNConfig.gym(), hiro=HIROConfig.minigrid(), sb3=FAMILIES["minigrid"].sb3)
+
 #: the families' defaults as dicts (a view of :data:`FAMILIES`)
 PRESETS: dict[str, dict[str, Any]] = {name: family.as_dict() for name, family in FAMILIES.items()}
 

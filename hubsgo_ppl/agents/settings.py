@@ -241,6 +241,11 @@ class GoalDQNConfig(Settings):
         """Potential-based shaping towards each sub-goal's cell."""
         return cls(hidden=(128, 128), lr=5e-4, batch_size=128, learning_starts=1000, shaping=1.0)
 
+    @classmethod
+    def gym(cls) -> "GoalDQNConfig":
+        """The mazes' low level without shaping (a user's env has no subgoal_potential)."""
+        return cls(hidden=(128, 128), lr=5e-4, batch_size=128, learning_starts=1000)
+
 
 class GoalTD3Config(Settings):
     """The learned arm low level (:class:`~.td3_her.GoalTD3`); the defaults are the configuration

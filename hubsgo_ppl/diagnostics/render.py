@@ -19,8 +19,10 @@ face) has a thick magenta outline, and the target cells of Ĝt's sub-goals (the 
 decision; none for h-DQN, which does not filter) a thin cyan one. A caption under the grid gives the
 step, the current sub-goal and Ĝt.
 
-Only MiniGrid mazes and hierarchical agents (hubsgo, hdqn) can be drawn this way; other runs are
-refused with one line. Frames are recorded by a wrapper around the run's env (``FrameRecorder``) and
+A Gymnasium env of one's own (family ``gym``, docs/own_env.md) is drawn from its own ``rgb_array``
+frames (built with ``render_mode="rgb_array"``), with the caption and without target cells. Only
+these and hierarchical agents (hubsgo, hdqn) can be drawn; other runs are refused with one line.
+Frames are recorded by a wrapper around the run's env (``FrameRecorder``) and
 the chosen sub-goals by wrapping the high level's ``select`` for the one episode; the agent itself is
 not changed. The GIF is written with Pillow, atomically.
 """
@@ -64,7 +66,7 @@ def check_renderable(resolved: dict[str, Any], what: str = "render") -> None:
     from ..agents.factory import HIERARCHICAL
 
     family, task = resolved.get("family"), resolved.get("task", "?")
-    if family != "minigrid":
+    if family not in ("minigrid", "gym"):
         raise RunError(f"{what} supports MiniGrid mazes; task {task!r} is a {family or 'non-maze'} task")
     agent = resolved.get("agent")
     if agent not in HIERARCHICAL:
@@ -85,6 +87,15 @@ class FrameRecorder(gym.Wrapper):
 
     def _capture(self, info: dict[str, Any]) -> None:
         u = self.env.unwrapped
+        if not callable(getattr(u, "get_frame", None)):         # a Gymnasium env of one's own: its frame
+            frame = self.env.render()
+            if not (isinstance(frame, np.ndarray) and frame.ndim == 3 and frame.shape[2] == 3):
+                raise RunError("render: the env returned no rgb_array frame from render(); give it "
+                               "render_mode='rgb_array' (an H x W x 3 uint8 array)")
+            self.frames.append(np.asarray(frame, dtype=np.uint8))
+            self.achieved.append(np.asarray(info["subgoals"], dtype=bool).copy())
+            self.targets.append([])
+            return
         self.frames.append(np.asarray(u.get_frame(highlight=False, tile_size=self.tile_size), dtype=np.uint8))
         self.achieved.append(np.asarray(info["subgoals"], dtype=bool).copy())
         self.targets.append([tuple(int(c) for c in u.subgoal_target(i)) for i in range(len(u.subgoal_names))])
@@ -143,7 +154,8 @@ def record_episode(resolved: dict[str, Any], env: gym.Env, agent: Any, seed: int
     if not (hasattr(agent, "high") and hasattr(agent, "filter") and hasattr(agent, "env")):
         raise RunError(f"agent {resolved.get('agent')!r} is not a hierarchical loop; cannot record its sub-goals")
     names = list(env.unwrapped.subgoal_names)
-    recorder = FrameRecorder(agent.env, tile_size=tile_size)
+    drawn = _rgb_env(resolved) if resolved.get("family") == "gym" else agent.env
+    recorder = FrameRecorder(drawn, tile_size=tile_size)
     decisions: list[tuple[int, int, np.ndarray | None]] = []
     given = bool(getattr(getattr(agent, "cfg", None), "filter_given_achieved", False))
     select = agent.high.select
@@ -163,10 +175,24 @@ def record_episode(resolved: dict[str, Any], env: gym.Env, agent: Any, seed: int
         stats = agent.run_episode(train=False, seed=env_seed)
     finally:
         agent.env = original_env
+        if drawn is not original_env:
+            drawn.close()
         with contextlib.suppress(AttributeError):
             del agent.high.select         # the instance attribute; the class's method shows again
     return Recording(names, recorder.frames, recorder.achieved, recorder.targets, decisions, stats,
                      env_seed, int(tile_size), str(getattr(agent.filter, "name", "none")))
+
+
+def _rgb_env(resolved: dict[str, Any]) -> gym.Env:
+    """The run's env (family gym) built to render ``rgb_array`` frames."""
+    from ..envs.subset import make_subset
+
+    kwargs = dict((resolved.get("hyper") or {}).get("env") or {})
+    try:
+        return make_subset(resolved["task_ref"], resolved.get("subgoals"), render_mode="rgb_array", **kwargs)
+    except TypeError as exc:
+        raise RunError(f"render: the env of task {resolved.get('task')!r} cannot be built with render_mode="
+                       f"'rgb_array' ({' '.join(str(exc).split())[:200]})") from None
 
 
 def _font(size: int):
@@ -236,13 +262,14 @@ def annotate_frames(rec: Recording, font_size: int | None = None) -> list[Any]:
         draw = ImageDraw.Draw(img)
         g, ghat, _ = rec.decision_at(i)
         targets = rec.targets[i]
-        if ghat is not None:
+        if targets and ghat is not None:        # (a Gymnasium env of one's own has no target cells)
             for j in np.flatnonzero(ghat):
                 if j != g:
                     x, y = targets[j]
                     draw.rectangle([x * t, y * t, (x + 1) * t - 1, (y + 1) * t - 1], outline=GHAT_COLOR, width=thin)
-        x, y = targets[g]
-        draw.rectangle([x * t, y * t, (x + 1) * t - 1, (y + 1) * t - 1], outline=CURRENT_COLOR, width=thick)
+        if targets:
+            x, y = targets[g]
+            draw.rectangle([x * t, y * t, (x + 1) * t - 1, (y + 1) * t - 1], outline=CURRENT_COLOR, width=thick)
         for k, line in enumerate(lines):
             draw.text((4, h + 3 + k * line_h), line, fill=CAPTION_FG, font=font)
         images.append(img)

@@ -26,6 +26,7 @@ __all__ = ["TaskInfo", "Catalogue", "SubgoalDef", "load_catalogue", "tasks", "ge
 _FAMILY_ENTRY = {
     "minigrid": "hubsgo_ppl.envs.minigrid.maze:MazeEnv",
     "robosuite": "hubsgo_ppl.envs.robosuite.gym_wrapper:make_robosuite_task",
+    "gym": "hubsgo_ppl.envs.gym_task:GymTask",          # any Gymnasium env (envs/gym_task.py)
 }
 
 

@@ -40,7 +40,7 @@ class Catalogue(StrictModel):
 
     task: str = Field(description="short name used on the command line, e.g. 'keydoor'")
     title: str = Field(default="", description="CamelCase name for the Gymnasium id, e.g. 'KeyDoor'")
-    family: Literal["minigrid", "robosuite"]
+    family: Literal["minigrid", "robosuite", "gym"]
     description: str = ""
     options: dict[str, Any] = Field(default_factory=dict)
     subgoals: list[SubgoalDef]

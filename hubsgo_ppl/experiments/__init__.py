@@ -1,5 +1,5 @@
 """Running experiments: :func:`train` (a driver calling :class:`Callback` objects), :class:`RunConfig`,
-evaluation, sweeps, revisions and transfers.
+evaluation, sweeps, revisions and transfers; :func:`train_env` on a Gymnasium env of one's own.
 
     from hubsgo_ppl.experiments import Callback, RunConfig, train
 
@@ -17,10 +17,10 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-__all__ = ["Callback", "CallbackList", "TrainingRun", "ResolvedRun", "RunConfig", "RunError", "train"]
+__all__ = ["Callback", "CallbackList", "TrainingRun", "ResolvedRun", "RunConfig", "RunError", "train", "train_env"]
 
 _HOMES = {"Callback": "callbacks", "CallbackList": "callbacks", "TrainingRun": "callbacks", "train": "driver",
-          "ResolvedRun": "resolved", "RunConfig": "resolved", "RunError": "resolved"}
+          "ResolvedRun": "resolved", "RunConfig": "resolved", "RunError": "resolved", "train_env": "own_env"}
 
 
 def __getattr__(name: str) -> Any:

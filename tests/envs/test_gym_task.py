@@ -1,0 +1,138 @@
+"""A Gymnasium env of one's own as a task (family gym, hubsgo_ppl/envs/gym_task.py)."""
+
+import sys
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import yaml
+
+from hubsgo_ppl.envs import get_task, make
+from hubsgo_ppl.envs.check import check_env
+from hubsgo_ppl.envs.gym_task import GymTask, callable_ref, is_success, load_callable
+from hubsgo_ppl.specs import SpecError
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+
+
+@pytest.fixture
+def corridor(monkeypatch):
+    monkeypatch.syspath_prepend(str(EXAMPLES))
+    import corridor_env
+
+    return corridor_env
+
+
+def _catalogue(tmp_path, subgoals, **options):
+    options = options or {"entry_point": "corridor_env:make_corridor", "max_episode_steps": 30}
+    path = tmp_path / "task.yaml"
+    path.write_text(yaml.safe_dump({"task": "corridor", "family": "gym", "options": options, "subgoals": subgoals}))
+    return path
+
+
+SUBGOALS = [{"name": "switch_a", "kind": "predicate", "args": {"fn": "corridor_env:switch_on", "which": "a"}},
+            {"name": "moved", "kind": "info", "args": {"key": "moved"}},
+            {"name": "goal", "kind": "goal"}]
+
+
+def test_each_kind_reads_the_state_the_info_and_the_success(tmp_path, corridor, monkeypatch):
+    real_step = corridor.Corridor.step
+
+    def step(self, action):         # the env reports "moved" itself
+        before = self.pos
+        obs, r, term, trunc, info = real_step(self, action)
+        return obs, r, term, trunc, {**info, "moved": self.pos != before}
+
+    monkeypatch.setattr(corridor.Corridor, "step", step)
+    env = make(_catalogue(tmp_path, SUBGOALS), seed=0)
+    assert env.unwrapped.subgoal_names == ["switch_a", "moved", "goal"]
+    task = env.env.unwrapped
+    obs, info = env.reset(seed=1)
+    assert obs.dtype == np.float32 and obs.shape == (3,)
+    assert info["subgoals"].tolist() == [False, False, False] and info["is_success"] is False
+    task.pos = 4
+    _, _, _, _, info = env.step(corridor.LEFT)           # to switch A's cell (3): moved, nothing pressed
+    assert info["subgoals"].tolist() == [False, True, False]
+    _, _, _, _, info = env.step(corridor.PRESS)
+    assert info["subgoals"].tolist() == [True, False, False] and env.subgoal_achieved().tolist() == [True, False, False]
+    task.pos = corridor.LENGTH - 2
+    _, reward, terminated, _, info = env.step(corridor.RIGHT)    # onto the open goal: success
+    assert (reward, terminated, info["is_success"]) == (1.0, True, True)
+    assert info["subgoals"].tolist() == [True, True, True]
+
+
+def test_success_is_the_envs_own_report_else_a_positive_terminal_reward():
+    assert is_success({"is_success": False}, 1.0, True) is False
+    assert is_success({"is_success": True}, 0.0, False) is True
+    assert is_success({}, 1.0, True) is True
+    assert is_success({}, 0.0, True) is False          # e.g. onto lava
+    assert is_success({}, 1.0, False) is False         # a reward on the way
+
+
+def test_the_task_meets_the_contract_and_its_seed_fixes_the_start(tmp_path, corridor):
+    env = make(_catalogue(tmp_path, SUBGOALS), seed=0)
+    assert check_env(env, steps=60) == []
+    starts = {seed: env.reset(seed=seed)[0][0] for seed in range(8)}
+    assert starts == {seed: env.reset(seed=seed)[0][0] for seed in range(8)} and len(set(starts.values())) > 1
+    assert env.subgoal_potential() is None           # the corridor gives no shaping, and needs none
+
+
+def test_a_registered_id_with_a_structured_observation_is_flattened(tmp_path):
+    path = _catalogue(tmp_path, [{"name": "goal", "kind": "goal"}], gym_id="Blackjack-v1")
+    env = make(path, seed=0)
+    space = env.observation_space              # Tuple(Discrete(32), Discrete(11), Discrete(2)), one-hot
+    assert isinstance(space, gym.spaces.Box) and space.shape == (45,) and space.dtype == np.float32
+    obs, _ = env.reset(seed=3)
+    assert obs.sum() == 3.0 and set(np.unique(obs)) <= {0.0, 1.0}
+
+
+@pytest.mark.parametrize("subgoals, options, message", [
+    ([{"name": "g", "kind": "at", "args": {"x": 1}}], None, "unknown kind 'at' for family gym"),
+    ([{"name": "g", "kind": "predicate"}], None, "kind predicate needs args.fn"),
+    ([{"name": "g", "kind": "predicate", "args": {"fn": "corridor_env:nothing"}}], None, "has no 'nothing'"),
+    ([{"name": "g", "kind": "predicate", "args": {"fn": "no_such_pkg.x:f"}}], None, "cannot import 'no_such_pkg.x'"),
+    ([{"name": "g", "kind": "predicate", "args": {"fn": "corridor_env"}}], None, "is not 'module:function'"),
+    ([{"name": "g", "kind": "goal"}], {"gym_id": "Pendulum-v1"}, "family gym trains on a Discrete action space"),
+    ([{"name": "g", "kind": "goal"}], {"gym_id": "NoSuchEnv-v0"}, "options.gym_id: Environment `NoSuchEnv`"),
+    ([{"name": "g", "kind": "goal"}], {"max_episode_steps": 5}, "give exactly one of entry_point"),
+    ([{"name": "g", "kind": "goal"}], {"gym_id": "CartPole-v1", "horizon": 5}, "horizon"),
+])
+def test_a_bad_catalogue_is_one_line_naming_it(tmp_path, corridor, subgoals, options, message):
+    path = _catalogue(tmp_path, subgoals, **(options or {}))
+    with pytest.raises(SpecError, match=message) as err:
+        GymTask(path)
+    assert str(path) in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_callable_only_this_process_holds_is_named_so_everywhere_else(monkeypatch):
+    def nested(env, obs, info):
+        return True
+
+    ref, importable = callable_ref(nested)
+    assert ref.startswith("<local>:nested#") and not importable
+    assert load_callable(ref, "here") is nested and callable_ref(nested) == (ref, False)
+    monkeypatch.setattr("hubsgo_ppl.envs.gym_task._LOCAL", {})      # another process
+    with pytest.raises(SpecError, match="lambda or a nested function of the Python process that trained"):
+        load_callable(ref, "there")
+    assert callable_ref(np.mean) == ("numpy:mean", True)
+    main = sys.modules["__main__"]
+    nested.__module__, nested.__qualname__ = "__main__", "script_goal"
+    monkeypatch.setattr(main, "script_goal", nested, raising=False)
+    assert callable_ref(nested) == ("__main__:script_goal", False)
+    monkeypatch.delattr(main, "script_goal")
+    with pytest.raises(SpecError, match="defined in the script that trained the run"):
+        load_callable("__main__:script_goal", "there")
+
+
+def test_a_gym_catalogue_is_a_task_and_a_scripted_low_level_is_refused(tmp_path, corridor):
+    from hubsgo_ppl.agents.config import ConfigError, resolve_hyper
+
+    path = _catalogue(tmp_path, SUBGOALS)
+    assert get_task(path).family == "gym"
+    hyper = resolve_hyper("gym", "corridor", "hubsgo")
+    assert hyper["low_level"] == "learned" and hyper["low"].get("shaping", 0.0) == 0.0
+    with pytest.raises(ConfigError, match="has no scripted low level"):
+        resolve_hyper("gym", "corridor", "hubsgo", low_level="scripted")
+    with pytest.raises(ConfigError, match="agent hiro sets goals in a space it knows"):
+        resolve_hyper("gym", "corridor", "hiro")
