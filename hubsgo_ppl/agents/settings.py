@@ -329,8 +329,8 @@ class HIGLConfig(HIROConfig):
     landmarks_novelty: Starts = 10      # the least-visited states
     landmark_pool: Count = 400          # replayed states the coverage landmarks are chosen from
     landmark_cutoff: Rate = 5.0         # graph edges longer than this (low-level value) are removed
-    landmark_step: Fraction = 0.3       # the pseudo-landmark's distance from the state (fraction of scale)
-    landmark_weight: NonNegative = 1.0  # of the landmark loss in the high level's actor loss (0: HIRO)
+    landmark_step: Fraction = 1.0       # the pseudo-landmark's largest distance from the state (fraction of scale)
+    landmark_weight: NonNegative = 0.1  # of the landmark loss in the high level's actor loss (0: HIRO)
     novelty_cell: optional(Rate) = None  # goal-space cell of the visit counts; None: 1 (a grid cell)
     graph_every: Count = 10             # high-level actor updates between landmark graph rebuilds
 

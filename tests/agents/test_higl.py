@@ -90,6 +90,6 @@ def test_higl_trains_through_the_cli_run_and_rejects_bad_settings(tmp_path):
     assert summary["finished"] and len(rows) == 1 and float(rows[0]["high/landmark_loss"]) >= 0
     cfg = _cfg()
     cfg["higl"]["landmark_step"] = 0
-    with pytest.raises(ValueError, match=r"^higl.landmark_step takes a number in \(0, 1\] \(default 0.3\), got 0$"):
+    with pytest.raises(ValueError, match=r"^higl.landmark_step takes a number in \(0, 1\] \(default 1.0\), got 0$"):
         build_higl(make("keydoor_cardinal", max_steps=120), cfg, seed=0)
     assert isinstance(build_higl(make("keydoor_cardinal", max_steps=120), _cfg(), seed=0), HIGL)
