@@ -93,3 +93,14 @@ def test_higl_trains_through_the_cli_run_and_rejects_bad_settings(tmp_path):
     with pytest.raises(ValueError, match=r"^higl.landmark_step takes a number in \(0, 1\] \(default 1.0\), got 0$"):
         build_higl(make("keydoor_cardinal", max_steps=120), cfg, seed=0)
     assert isinstance(build_higl(make("keydoor_cardinal", max_steps=120), _cfg(), seed=0), HIGL)
+
+
+@pytest.mark.mujoco
+def test_higl_trains_on_an_arm_task(tmp_path):
+    """The TD3 low level's value gives the distances; visit counts over 5 cm cells of the end-effector."""
+    overrides = [f"higl.{k}={v}" for k, v in SMALL.items()] + ["higl.low_learning_starts=100", "higl.graph_every=2"]
+    summary = train(RunConfig(task="push_any_one", agent="higl", steps=1, seed=0, overrides=overrides),
+                    tmp_path / "arm", progress=False)
+    rows = read_csv_rows(tmp_path / "arm" / "metrics.csv")
+    assert summary["finished"] and np.isfinite(float(rows[0]["high/landmark_loss"]))
+    assert np.isfinite(float(rows[0]["low/critic_loss"]))
