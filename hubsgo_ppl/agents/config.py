@@ -13,7 +13,7 @@ from typing import Any, Sequence
 from pydantic import create_model
 
 from .presets import apply_overrides, preset
-from .settings import (DERIVED, ConfigError, choice, GoalDQNConfig, GoalTD3Config, HighLevelConfig, HIROConfig, LoopConfig,
+from .settings import (DERIVED, ConfigError, choice, GoalDQNConfig, GoalTD3Config, HighLevelConfig, HIGLConfig, HIROConfig, LoopConfig,
                        ScriptedMazeConfig, ScriptedOSCConfig, Settings, integer, sb3_model, validate)
 
 __all__ = ["ConfigError", "section_classes", "make_config", "resolve_hyper", "set_keys",
@@ -47,6 +47,8 @@ def section_classes(agent: str, family: str, low_level: str) -> dict[str, type]:
                               "Gymnasium env of one's own does not declare; use hubsgo, hdqn or a flat baseline",
                               None, "agent")
         return {"hiro": HIROConfig}
+    if agent == "higl":
+        return {"higl": HIGLConfig}
     return {}
 
 

@@ -6,7 +6,8 @@ their filter (and low level):
 
 :data:`BUILDERS` is a fixed table in this module, mapping each agent name to its builder. The two
 hierarchical agents map to :func:`build_hierarchical`. The flat baselines (``ddqn``, ``dqn``, ``ppo``,
-``td3``) and HIRO (which has its own loop, :mod:`hubsgo_ppl.agents.hiro`) map to a
+``td3``), HIRO (which has its own loop, :mod:`hubsgo_ppl.agents.hiro`) and HIGL (HIRO with landmarks,
+:mod:`hubsgo_ppl.agents.higl`) map to a
 ``"module:function"`` string that :func:`build_agent` imports on first use, so their dependencies
 (SB3, ...) load only when that agent is built. Their modules do not register anything themselves; a
 new agent is added by adding an entry here.
@@ -85,6 +86,7 @@ BUILDERS: dict[str, Callable[..., Any] | str] = {
     "ppo": "hubsgo_ppl.agents.flat:build_ppo",
     "td3": "hubsgo_ppl.agents.flat:build_td3",
     "hiro": "hubsgo_ppl.agents.hiro:build_hiro",
+    "higl": "hubsgo_ppl.agents.higl:build_higl",
 }
 
 

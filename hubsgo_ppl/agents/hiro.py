@@ -302,8 +302,21 @@ class HIRO:
         self.relabelled[0] += len(idx)
         self.relabelled[1] += int((idx != 0).sum())
         stats = _td3_stats(self.high.update(b["obs"], goal, b["reward"], b["next_obs"],
-                                            cfg.gamma_high * (1 - b["done"]), self._noise(cfg.batch_size, self.goals.dim)))
-        return {f"high/{k}": v for k, v in stats.items()} | {"high/relabel_rate": float((idx != 0).float().mean())}
+                                            cfg.gamma_high * (1 - b["done"]), self._noise(cfg.batch_size, self.goals.dim),
+                                            actor_extra=self._actor_extra(b)))
+        return ({f"high/{k}": v for k, v in stats.items()} | {"high/relabel_rate": float((idx != 0).float().mean())}
+                | self._extra_stats())
+
+    # -- what a variant adds (HIGL, :mod:`.higl`); HIRO adds nothing ---------------------------------------
+    def _actor_extra(self, batch: dict[str, torch.Tensor]) -> Callable[[torch.Tensor], torch.Tensor] | None:
+        """A term of the high level's actor loss on ``batch``, a function of the proposed goals."""
+        return None
+
+    def _extra_stats(self) -> dict[str, float]:
+        return {}
+
+    def _visited(self, obs: np.ndarray, ag: np.ndarray, reward: float) -> None:
+        """A state reached in training (with the env reward of the step into it, 0 on reset)."""
 
     def run_episode(self, train: bool = True, seed: int | None = None) -> EpisodeStats:
         env, cfg, c = self.env, self.cfg, self.cfg.c
@@ -312,6 +325,8 @@ class HIRO:
         tally.note(info)                        # HIRO counts a success reported on reset
         obs = np.asarray(obs, dtype=np.float32)
         ag = self.goals.achieved(obs)
+        if train:
+            self._visited(obs, ag, 0.0)
         options, done = 0, False
         while not done:
             goal0 = self._high_goal(obs, train)
@@ -333,6 +348,7 @@ class HIRO:
                     r_lo = -float(np.linalg.norm(next_g / self.goals.scale))
                     self.low_buf.add(obs=obs, goal=g, action=action, reward=r_lo, next_obs=next_obs,
                                      next_goal=next_g, done=float(terminated))
+                    self._visited(next_obs, next_ag, float(reward))
                     self.env_steps += 1
                     if len(self.low_buf) >= max(cfg.low_learning_starts, cfg.batch_size):
                         stats = self.low.update(self.low_buf.sample(cfg.batch_size),

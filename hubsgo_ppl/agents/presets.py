@@ -10,7 +10,7 @@ import copy
 from dataclasses import dataclass, field
 from typing import Any
 
-from .settings import GoalDQNConfig, HighLevelConfig, HIROConfig, LoopConfig, ScriptedOSCConfig, Settings
+from .settings import GoalDQNConfig, HighLevelConfig, HIGLConfig, HIROConfig, LoopConfig, ScriptedOSCConfig, Settings
 
 __all__ = ["FamilyDefaults", "FAMILIES", "PRESETS", "TASK_PRESETS", "preset", "apply_overrides"]
 
@@ -18,7 +18,7 @@ __all__ = ["FamilyDefaults", "FAMILIES", "PRESETS", "TASK_PRESETS", "preset", "a
 @dataclass(frozen=True)
 class FamilyDefaults:
     """A task family's defaults, typed: the run's own settings, the sections of the hierarchical agents
-    and HIRO (their settings models), and the flat baselines' Stable-Baselines3 arguments (checked by
+    and HIRO and HIGL (their settings models), and the flat baselines' Stable-Baselines3 arguments (checked by
     :func:`~.settings.sb3_model` when a run is resolved)."""
 
     steps: int
@@ -27,6 +27,7 @@ class FamilyDefaults:
     high: HighLevelConfig
     low: Settings                           # the settings of the family's default low level
     hiro: HIROConfig
+    higl: HIGLConfig
     sb3: dict[str, dict[str, Any]] = field(default_factory=dict)    # section -> SB3 keyword arguments
     env: dict[str, Any] = field(default_factory=dict)                # keyword arguments of the env
 
@@ -37,7 +38,7 @@ class FamilyDefaults:
 
         return {"steps": self.steps, "low_level": self.low_level, "env": copy.deepcopy(self.env),
                 "loop": keys(self.loop), "high": keys(self.high), "low": keys(self.low),
-                **copy.deepcopy(self.sb3), "hiro": keys(self.hiro)}
+                **copy.deepcopy(self.sb3), "hiro": keys(self.hiro), "higl": keys(self.higl)}
 
 
 FAMILIES: dict[str, FamilyDefaults] = {
@@ -45,7 +46,7 @@ FAMILIES: dict[str, FamilyDefaults] = {
     # defaults"); nothing maze-specific lives here.
     "minigrid": FamilyDefaults(
         steps=40_000, low_level="learned", loop=LoopConfig.minigrid(), high=HighLevelConfig.minigrid(),
-        low=GoalDQNConfig.minigrid(), hiro=HIROConfig.minigrid(),
+        low=GoalDQNConfig.minigrid(), hiro=HIROConfig.minigrid(), higl=HIGLConfig.minigrid(),
         # flat baselines (agents/flat.py); dqn and ddqn share "dqn"
         sb3={"dqn": {"learning_rate": 5e-4, "buffer_size": 100_000, "learning_starts": 1000, "batch_size": 64,
                      "train_freq": 4, "target_update_interval": 1000, "exploration_fraction": 0.3,
@@ -55,7 +56,7 @@ FAMILIES: dict[str, FamilyDefaults] = {
     # StackCubes needs ~20k steps; PushAnyOne 8k, CollectThreeBalls 12k suffice (TASK_PRESETS)
     "robosuite": FamilyDefaults(
         steps=20_000, low_level="scripted", loop=LoopConfig.robosuite(), high=HighLevelConfig.robosuite(),
-        low=ScriptedOSCConfig(), hiro=HIROConfig.robosuite(),
+        low=ScriptedOSCConfig(), hiro=HIROConfig.robosuite(), higl=HIGLConfig.robosuite(),
         sb3={"td3": {"learning_rate": 1e-3, "buffer_size": 100_000, "learning_starts": 1000, "batch_size": 256,
                      "train_freq": 1, "gamma": 0.99, "noise_sigma": 0.1, "policy_kwargs": {"net_arch": [256, 256]}}}),
 }

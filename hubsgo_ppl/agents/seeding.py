@@ -17,7 +17,7 @@ import torch
 
 __all__ = ["NET_INIT_STREAM", "HIGH_LEVEL_STREAM", "LOW_LEVEL_STREAM", "CRITIC_STREAM", "EVAL_LOW_LEVEL_STREAM",
            "LOOP_STREAM",
-           "SB3_STREAM", "HIRO_STREAM", "EVAL_SEED_OFFSET", "SB3_EVAL_EPISODE", "seed_sequence",
+           "SB3_STREAM", "HIRO_STREAM", "HIGL_STREAM", "EVAL_SEED_OFFSET", "SB3_EVAL_EPISODE", "seed_sequence",
            "stream_seed", "stream_rng", "stream_generator", "episode_seed"]
 
 #: hierarchical agents: the torch generator of every network initialisation (and GoalTD3's noise)
@@ -38,6 +38,8 @@ LOOP_STREAM = 7
 SB3_STREAM = 11
 #: HIRO: its torch generator, and (spawned from the same sequence) its numpy generator
 HIRO_STREAM = 21
+#: HIGL: its landmarks (the pool the coverage landmarks are drawn from); its networks are HIRO's
+HIGL_STREAM = 22
 
 #: ``evaluate``: episode ``i`` is reset with ``episode_seed(seed + EVAL_SEED_OFFSET, i)``, so evaluation
 #: episodes do not replay training episodes

@@ -10,6 +10,7 @@ section    settings
 ``low``    :class:`GoalDQNConfig` (learned grid low level), :class:`GoalTD3Config` (learned arm low
            level), :class:`ScriptedMazeConfig` or :class:`ScriptedOSCConfig` (scripted low levels)
 ``hiro``   :class:`HIROConfig` (``total_steps`` comes from ``steps``)
+``higl``   :class:`HIGLConfig`: HIRO's settings and the landmarks'
 ``dqn``,   keyword arguments of Stable-Baselines3's DQN, PPO, TD3 (:func:`sb3_model`), plus
 ``ppo``,   ``unit_steps`` (:mod:`.flat`) and, for ``td3``, ``noise_sigma``
 ``td3``
@@ -32,7 +33,7 @@ from pydantic import (BaseModel, BeforeValidator, ConfigDict, Field, StrictBool,
                       ValidationError, create_model)
 
 __all__ = ["ConfigError", "Settings", "LoopConfig", "HighLevelConfig", "GoalDQNConfig", "GoalTD3Config",
-           "HIROConfig", "ScriptedMazeConfig", "ScriptedOSCConfig", "DERIVED", "sb3_model", "validate",
+           "HIROConfig", "HIGLConfig", "ScriptedMazeConfig", "ScriptedOSCConfig", "DERIVED", "sb3_model", "validate",
            "describe"]
 
 #: set by the builders from the run's ``steps``, never in a section
@@ -324,6 +325,24 @@ class HIROConfig(Settings):
         """Goals are end-effector offsets (m) within +-goal_scale."""
         return cls(c=10, hidden=(256, 256), lr=3e-4, batch_size=128, low_learning_starts=1000,
                    goal_scale=0.3, low_noise=0.1)
+
+
+class HIGLConfig(HIROConfig):
+    """HIGL (:mod:`.higl`): HIRO's settings, and the landmarks that guide its high level."""
+
+    landmarks_coverage: Count = 20      # by farthest-point sampling over the pool
+    landmarks_novelty: Starts = 10      # the least-visited states
+    landmark_pool: Count = 400          # replayed states the coverage landmarks are chosen from
+    landmark_cutoff: Rate = 5.0         # graph edges longer than this (low-level value) are removed
+    landmark_step: Fraction = 1.0       # the pseudo-landmark's largest distance from the state (fraction of scale)
+    landmark_weight: NonNegative = 0.1  # of the landmark loss in the high level's actor loss (0: HIRO)
+    novelty_cell: optional(Rate) = None  # goal-space cell of the visit counts; None: 1 (a grid cell)
+    graph_every: Count = 10             # high-level actor updates between landmark graph rebuilds
+
+    @classmethod
+    def robosuite(cls) -> "HIGLConfig":
+        """HIRO's arm settings; visit counts over 5 cm cells."""
+        return cls(**HIROConfig.robosuite().model_dump(exclude_unset=True), novelty_cell=0.05)
 
 
 # -- Stable-Baselines3's sections ----------------------------------------------------------------------

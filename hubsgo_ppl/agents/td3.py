@@ -1,4 +1,5 @@
-"""The TD3 core shared by HIRO (:mod:`.hiro`: its high level and its continuous low level) and the
+"""The TD3 core shared by HIRO (:mod:`.hiro`: its high level and its continuous low level), HIGL
+(:mod:`.higl`, HIRO's structure with a landmark term in the high level's actor loss) and the
 learned arm low level (:mod:`.td3_her`, GoalTD3 + HER).
 
 TD3 (Fujimoto, van Hoof, Meger 2018): a deterministic actor ``tanh(·)``, twin critics whose minimum
@@ -13,7 +14,7 @@ in ``[-scale, scale]`` (HIRO), where the critics see ``a / scale``.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 import torch
@@ -90,9 +91,12 @@ class TD3Core:
 
     # -- learning ------------------------------------------------------------------------------------
     def update(self, x: torch.Tensor, a: torch.Tensor, r: torch.Tensor, x_next: torch.Tensor,
-               discount: torch.Tensor | float, noise: torch.Tensor) -> TD3Step:
+               discount: torch.Tensor | float, noise: torch.Tensor,
+               actor_extra: Callable[[torch.Tensor], torch.Tensor] | None = None) -> TD3Step:
         """One TD3 step: ``y = r + discount * min_i Q_i'(x', μ'(x') + ε)``; the actor and the targets
-        every ``policy_delay`` steps. ``noise`` is standard normal, drawn by the caller's generator."""
+        every ``policy_delay`` steps. ``noise`` is standard normal, drawn by the caller's generator.
+        ``actor_extra``: a term added to the actor's loss, a function of the actor's actions ``μ(x)``
+        (HIGL's landmark loss), called only on the steps that update the actor."""
         with torch.no_grad():
             eps = (noise * self.target_noise).clamp(-self.target_noise_clip, self.target_noise_clip)
             if self.scale is None:
@@ -115,6 +119,8 @@ class TD3Core:
             loss = -self.q_values(self.critics[:1], x, pi)[0].mean()
             if self.action_l2 is not None:
                 loss = loss + self.action_l2 * pi.pow(2).mean()
+            if actor_extra is not None:
+                loss = loss + actor_extra(pi)
             self.actor_opt.zero_grad()
             loss.backward()
             self.actor_opt.step()

@@ -30,8 +30,8 @@ def env():
 
 
 def test_agent_names_and_lazy_builders_resolve():
-    assert agent_names() == ["ddqn", "dqn", "hdqn", "hiro", "hubsgo", "ppo", "td3"]
-    for name in ("ddqn", "dqn", "ppo", "td3", "hiro"):
+    assert agent_names() == ["ddqn", "dqn", "hdqn", "higl", "hiro", "hubsgo", "ppo", "td3"]
+    for name in ("ddqn", "dqn", "ppo", "td3", "hiro", "higl"):
         module, func = BUILDERS[name].split(":")
         assert callable(getattr(importlib.import_module(module), func)), name
 

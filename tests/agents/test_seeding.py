@@ -7,7 +7,7 @@ from hubsgo_ppl.agents import seeding
 from hubsgo_ppl.agents.seeding import episode_seed, seed_sequence, stream_generator, stream_rng, stream_seed
 
 STREAMS = [seeding.NET_INIT_STREAM, seeding.HIGH_LEVEL_STREAM, seeding.LOW_LEVEL_STREAM, seeding.CRITIC_STREAM,
-           seeding.LOOP_STREAM, seeding.SB3_STREAM, seeding.HIRO_STREAM]
+           seeding.LOOP_STREAM, seeding.SB3_STREAM, seeding.HIRO_STREAM, seeding.HIGL_STREAM]
 
 
 def test_each_helper_is_the_seed_sequence_of_seed_and_stream():

@@ -21,6 +21,7 @@ from typing import Any, Callable
 
 from ...specs import SpecError
 from ..subgoals import Catalogue
+from .cardinal import CARDINAL, primitive, primitives
 from .layout import MazeSpec, MazeState, load_maze_spec
 
 __all__ = ["plan", "plan_or_none", "optimal_steps", "optimal_return", "transition", "holds", "shortest_path_cells",
@@ -52,6 +53,13 @@ def transition(spec_or_maze: MazeSpec | _Maze, s: MazeState, action: str) -> Maz
     """MiniGrid's step on the symbolic state for one named action (``left``, ``forward``, ...)."""
     m = spec_or_maze if isinstance(spec_or_maze, _Maze) else _Maze(spec_or_maze)
     x, y = s.pos
+    if action in CARDINAL:      # turn, then the primitive for what is in front (envs/minigrid/cardinal.py)
+        s = s._replace(dir=CARDINAL[action])
+        dx, dy = _DIR_VEC[s.dir]
+        door = m.door_at.get((x + dx, y + dy))
+        front = ("object" if (x + dx, y + dy) in s.objects else
+                 "door" if door is not None and s.doors[door] != 2 else "other")
+        return transition(m, s, primitive(front, s.carrying >= 0))
     if action == "left":
         return s._replace(dir=(s.dir - 1) % 4)
     if action == "right":
@@ -156,7 +164,8 @@ def _bfs(spec: MazeSpec, start: MazeState, done: Callable[[MazeState], bool],
             continue
         for a, name in enumerate(m.actions):
             t = transition(m, s, name)
-            if t in parent or (moves_only and name not in _MOVES and not done(t)):
+            moved = name in _MOVES or (name in CARDINAL and (t.objects, t.doors) == (s.objects, s.doors))
+            if t in parent or (moves_only and not moved and not done(t)):
                 continue
             parent[t] = (s, a)
             if done(t):
@@ -302,7 +311,7 @@ def _relaxed(spec: MazeSpec, start: MazeState) -> tuple[bool, set[int]]:
     unreachable. A state on lava achieves no sub-goal (its episode has ended); its objects and doors
     are those of the state before it."""
     lay = spec.layout
-    acts = set(spec.options.actions)
+    acts = set(primitives(spec.options.actions))
     objects, doors = lay.carriables, lay.doors
     door_at = {d.cell: j for j, d in enumerate(doors)}
     blocked = set(lay.walls) if "pickup" in acts else set(lay.walls) | {c for c in start.objects if c}
@@ -404,7 +413,7 @@ def check_reachable(source: Any, max_states: int = 300_000) -> list[str] | None:
 
 
 def _unreachable(spec: MazeSpec, starts: list[MazeState]) -> SpecError:
-    acts = spec.options.actions
+    acts = primitives(spec.options.actions)
     closed = any(d != 2 for d in starts[0].doors)
     locked = any(d == 0 for d in starts[0].doors)
     if closed and "toggle" not in acts:
@@ -416,4 +425,4 @@ def _unreachable(spec: MazeSpec, starts: list[MazeState]) -> SpecError:
     if "forward" not in acts:
         hint = "there is no forward action, so the agent cannot move; add forward to options.actions"
     return SpecError(f"{spec.source}: the goal {spec.layout.goal} cannot be reached from the start "
-                     f"{starts[0].pos} with the actions {', '.join(acts)}; {hint}")
+                     f"{starts[0].pos} with the actions {', '.join(spec.options.actions)}; {hint}")

@@ -33,7 +33,8 @@ Minigrid ``options`` (all validated, unknown keys rejected)::
     max_steps: 2000                       # default 4 * width * height
     start_dir: right                      # right | down | left | up | random (seeded by reset)
     start: cell                           # cell: on A | room: a free cell of A's room (seeded by reset)
-    actions: [left, right, forward, pickup, toggle]   # subset of MiniGrid's actions, in this order
+    actions: [left, right, forward, pickup, toggle]   # subset of MiniGrid's actions, in this order;
+                                          # or [east, south, west, north]: move, pick up and open on contact
     obs_mode: symbolic                    # symbolic | image | egocentric
     mission: "reach the green goal"
 
@@ -58,6 +59,7 @@ from pydantic import BaseModel, Field, ValidationError, field_validator, model_v
 
 from ...specs import SpecError, StrictModel, format_validation_error
 from ..subgoals import Catalogue, load_catalogue
+from .cardinal import CARDINAL
 
 __all__ = ["LegendEntry", "MazeOptions", "MazeObject", "Layout", "Predicate", "MazeSpec", "MazeState",
            "PREDICATE_KINDS", "DIRECTIONS", "parse_layout", "load_maze_spec"]
@@ -125,9 +127,12 @@ class MazeOptions(StrictModel):
     @classmethod
     def _actions_ok(cls, v: list[str]) -> list[str]:
         known = [a.name for a in Actions]
-        bad = [a for a in v if a not in known]
+        bad = [a for a in v if a not in known and a not in CARDINAL]
         if bad:
-            raise ValueError(f"unknown action(s) {bad}; use names from: {', '.join(known)}")
+            raise ValueError(f"unknown action(s) {bad}; use names from: {', '.join(known)}; or the cardinal "
+                             f"moves {', '.join(CARDINAL)}")
+        if any(a in CARDINAL for a in v) and not all(a in CARDINAL for a in v):
+            raise ValueError(f"the cardinal moves ({', '.join(CARDINAL)}) cannot be mixed with MiniGrid's actions")
         if not v or len(set(v)) != len(v):
             raise ValueError("actions must be a non-empty list without repeats")
         return v

@@ -25,6 +25,9 @@ Default ``[left, right, forward, pickup, toggle]``:
 | 3   | pickup  | pick up the object in front     |
 | 4   | toggle  | open/close (unlock) the door in front |
 
+``actions: [east, south, west, north]`` (the cardinal set, :mod:`.cardinal`): each action moves one
+cell that way, picking up a key or ball and opening a door (locked: with its key in hand) on contact.
+
 ## Observation
 
 A flat ``Box`` of float32, so CPU training is fast (``obs_mode: symbolic``, the default), laid out as
@@ -96,7 +99,7 @@ from minigrid.minigrid_env import MiniGridEnv
 
 from ...specs import SpecError
 from ..subgoals import Catalogue
-from . import egocentric
+from . import cardinal, egocentric
 from .layout import DIRECTIONS, MazeSpec, MazeState, load_maze_spec
 
 __all__ = ["MazeEnv"]
@@ -143,7 +146,8 @@ class MazeEnv(MiniGridEnv):
         self.obs_mode = obs_mode or spec.options.obs_mode
         # the cells an episode may start on: the layout's A, or every free cell of A's room
         self._starts = lay.start_room() if (start or spec.options.start) == "room" else (lay.agent_start,)
-        self._action_map = tuple(Actions[a] for a in spec.options.actions)
+        self._cardinal = cardinal.is_cardinal(spec.options.actions)
+        self._action_map = tuple(cardinal.CARDINAL[a] if self._cardinal else Actions[a] for a in spec.options.actions)
         self.action_space = spaces.Discrete(len(self._action_map))
         self.action_names = list(spec.options.actions)
 
@@ -246,7 +250,8 @@ class MazeEnv(MiniGridEnv):
         if not 0 <= a < len(self._action_map):
             raise ValueError(f"action {action!r} is outside Discrete({len(self._action_map)}); "
                              f"actions are {self.action_names}")
-        obs, reward, terminated, truncated, _ = super().step(self._action_map[a])
+        act = cardinal.env_action(self, self._action_map[a]) if self._cardinal else self._action_map[a]
+        obs, reward, terminated, truncated, _ = super().step(act)
         achieved = self.subgoal_achieved()
         success = bool(terminated) and self._agent_cell() == self._goal
         return obs, float(reward), bool(terminated), bool(truncated), {"subgoals": achieved,
