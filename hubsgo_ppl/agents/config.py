@@ -41,14 +41,12 @@ def section_classes(agent: str, family: str, low_level: str) -> dict[str, type]:
                ("gym", "learned"): GoalDQNConfig,
                ("robosuite", "scripted"): ScriptedOSCConfig}.get((family, low_level), GoalTD3Config)
         return {"loop": LoopConfig, "high": HighLevelConfig, "low": low}
-    if agent == "hiro":
+    if agent in ("hiro", "higl"):
         if family == "gym":
-            raise ConfigError("agent hiro sets goals in a space it knows (a maze cell, an arm's position), which a "
+            raise ConfigError(f"agent {agent} sets goals in a space it knows (a maze cell, an arm's position), which a "
                               "Gymnasium env of one's own does not declare; use hubsgo, hdqn or a flat baseline",
                               None, "agent")
-        return {"hiro": HIROConfig}
-    if agent == "higl":
-        return {"higl": HIGLConfig}
+        return {"hiro": HIROConfig} if agent == "hiro" else {"higl": HIGLConfig}
     return {}
 
 

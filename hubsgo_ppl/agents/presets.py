@@ -65,7 +65,7 @@ FAMILIES: dict[str, FamilyDefaults] = {
 # baselines, and their learned low level without shaping, which needs a potential a user's env lacks
 FAMILIES["gym"] = FamilyDefaults(
     steps=40_000, low_level="learned", loop=LoopConfig.minigrid(), high=HighLevelConfig.minigrid(),
-    low=GoalDQNConfig.gym(), hiro=HIROConfig.minigrid(), sb3=FAMILIES["minigrid"].sb3)
+    low=GoalDQNConfig.gym(), hiro=HIROConfig.minigrid(), higl=HIGLConfig.minigrid(), sb3=FAMILIES["minigrid"].sb3)
 
 #: the families' defaults as dicts (a view of :data:`FAMILIES`)
 PRESETS: dict[str, dict[str, Any]] = {name: family.as_dict() for name, family in FAMILIES.items()}
