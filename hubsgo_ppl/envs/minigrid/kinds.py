@@ -39,7 +39,7 @@ from pydantic import BaseModel, ValidationError, field_validator, model_validato
 
 from ...specs import SpecError, StrictModel, format_validation_error
 
-__all__ = ["KINDS", "Scene", "Kind", "compile_kind", "scan", "regions", "route_doors"]
+__all__ = ["KINDS", "Scene", "Kind", "compile_kind", "scan", "regions", "route_doors", "goal_cell", "new_scene"]
 
 Cell = tuple[int, int]
 _NEIGHBOURS = ((1, 0), (0, 1), (-1, 0), (0, -1))
@@ -129,6 +129,27 @@ class Scene:
     route: tuple[int, ...] = ()                          # id() of the doors on the start-goal walk, in order
     mission_obj: Any = None                              # the env's ``obj`` (the object to fetch), if any
     version: int = 0                                     # raised whenever ``objects`` is read again
+    walls: np.ndarray | None = None                      # (W, H) bool
+    lava: np.ndarray | None = None                       # (W, H) bool
+
+    def reread(self, grid: Any, carrying: Any) -> None:
+        """Read the objects of ``grid`` again (after an action that may move, take, drop or open one)."""
+        self.objects, self.walls, self.lava = scan(grid)
+        self.carrying = carrying
+        self.version += 1
+
+
+def new_scene(grid: Any, agent: Cell, carrying: Any = None, mission_obj: Any = None) -> Scene:
+    """The scene of a freshly reset ``grid`` (a MiniGrid ``Grid``): what is locked, the boxes, the rooms
+    and the doors on the way from ``agent`` to the goal are recorded from it."""
+    s = Scene(grid.width, grid.height, [], None, (int(agent[0]), int(agent[1])), mission_obj=mission_obj)
+    s.reread(grid, carrying)
+    doors = {cell: id(obj) for obj, cell in s.objects if obj.type == "door"}
+    s.locked_at_reset = frozenset(id(obj) for obj, _ in s.objects if obj.type == "door" and obj.is_locked)
+    s.boxes_at_reset = {id(obj): obj for obj, _ in s.objects if obj.type == "box"}
+    s.rooms = regions(s.walls, set(doors))
+    s.route = route_doors(s.walls, doors, s.agent, goal_cell(s))
+    return s
 
 
 def scan(grid: Any) -> tuple[list[tuple[Any, Cell]], np.ndarray, np.ndarray]:

@@ -44,7 +44,7 @@ from pydantic import Field, ValidationError, field_validator
 from ...specs import SpecError, StrictModel, format_validation_error
 from ..subgoals import Catalogue, load_catalogue
 from . import egocentric
-from .kinds import Kind, Scene, compile_kind, goal_cell, regions, route_doors, scan
+from .kinds import Kind, Scene, compile_kind, new_scene
 
 __all__ = ["RegisteredOptions", "RegisteredEnv", "is_registered", "make_minigrid"]
 
@@ -201,35 +201,28 @@ class RegisteredEnv(gym.Env):
         return int(x), int(y)
 
     def _rescan(self) -> None:
-        """Re-read the objects (after reset, or an action that may move, take, drop or open one)."""
-        objects, walls, lava = scan(self.inner.grid)
+        """Re-read the objects (after reset, or an action that may move, take, drop or open one) and
+        the window's map: channel 0, cannot step there (wall, closed door, object on the floor, outside);
+        channel 1, lava."""
         s = self.scene
-        s.objects, s.carrying = objects, self.inner.carrying
-        s.version += 1
+        if s.version:
+            s.reread(self.inner.grid, self.inner.carrying)
         pad = egocentric.VIEW // 2
-        W, H = walls.shape
-        # channel 0: cannot step there (wall, closed door, object on the floor, outside); channel 1: lava
+        W, H = s.walls.shape
         grid = np.zeros((2, W + 2 * pad, H + 2 * pad), np.float32)
         grid[0] = 1.0
-        grid[0, pad:pad + W, pad:pad + H] = walls
-        grid[1, pad:pad + W, pad:pad + H] = lava
-        for obj, (x, y) in objects:
+        grid[0, pad:pad + W, pad:pad + H] = s.walls
+        grid[1, pad:pad + W, pad:pad + H] = s.lava
+        for obj, (x, y) in s.objects:
             if obj.type not in ("goal", "floor", "lava") and not (obj.type == "door" and obj.is_open):
                 grid[0, x + pad, y + pad] = 1.0
         self._window = grid
-        self._walls = walls
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         self.inner.reset(seed=seed, options=options)
-        W, H = self.inner.width, self.inner.height
-        self.scene = Scene(W, H, [], None, self._agent_cell(), mission_obj=getattr(self.inner, "obj", None))
+        self.scene = new_scene(self.inner.grid, self._agent_cell(), self.inner.carrying,
+                               getattr(self.inner, "obj", None))
         self._rescan()
-        s = self.scene
-        doors = {cell: id(obj) for obj, cell in s.objects if obj.type == "door"}
-        s.locked_at_reset = frozenset(id(obj) for obj, _ in s.objects if obj.type == "door" and obj.is_locked)
-        s.boxes_at_reset = {id(obj): obj for obj, _ in s.objects if obj.type == "box"}
-        s.rooms = regions(self._walls, set(doors))
-        s.route = route_doors(self._walls, doors, s.agent, goal_cell(s))
         return self._obs(), {"subgoals": self.subgoal_achieved(), "is_success": False}
 
     def step(self, action):
