@@ -133,8 +133,9 @@ class Scene:
     lava: np.ndarray | None = None                       # (W, H) bool
 
     def reread(self, grid: Any, carrying: Any) -> None:
-        """Read the objects of ``grid`` again (after an action that may move, take, drop or open one)."""
-        self.objects, self.walls, self.lava = scan(grid)
+        """Read the objects of ``grid`` again (walls and lava stay as at reset)."""
+        w = grid.width
+        self.objects = [(o, (i % w, i // w)) for i, o in enumerate(grid.grid) if o is not None and o.type != "wall"]
         self.carrying = carrying
         self.version += 1
 
@@ -143,7 +144,8 @@ def new_scene(grid: Any, agent: Cell, carrying: Any = None, mission_obj: Any = N
     """The scene of a freshly reset ``grid`` (a MiniGrid ``Grid``): what is locked, the boxes, the rooms
     and the doors on the way from ``agent`` to the goal are recorded from it."""
     s = Scene(grid.width, grid.height, [], None, (int(agent[0]), int(agent[1])), mission_obj=mission_obj)
-    s.reread(grid, carrying)
+    s.objects, s.walls, s.lava = scan(grid)
+    s.carrying = carrying
     doors = {cell: id(obj) for obj, cell in s.objects if obj.type == "door"}
     s.locked_at_reset = frozenset(id(obj) for obj, _ in s.objects if obj.type == "door" and obj.is_locked)
     s.boxes_at_reset = {id(obj): obj for obj, _ in s.objects if obj.type == "box"}
@@ -177,35 +179,34 @@ def regions(walls: np.ndarray, doors: set[Cell]) -> np.ndarray:
     cell in a straight wall, i.e. with wall (or the grid's edge) on both sides two cells deep along one
     axis (FourRooms' doorways)."""
     W, H = walls.shape
+    p = np.pad(walls, 2, constant_values=True)          # the grid's edge counts as wall
 
-    def wall(x: int, y: int) -> bool:
-        return not (0 <= x < W and 0 <= y < H) or bool(walls[x, y])
+    def shifted(dx: int, dy: int) -> np.ndarray:
+        return p[2 + dx:2 + dx + W, 2 + dy:2 + dy + H]
 
-    label = np.full((W, H), -1, np.int32)
-    blocked = walls.copy()
+    gaps = ((shifted(-1, 0) & shifted(1, 0) & shifted(-2, 0) & shifted(2, 0))
+            | (shifted(0, -1) & shifted(0, 1) & shifted(0, -2) & shifted(0, 2)))
+    blocked = walls | gaps
     for x, y in doors:
         blocked[x, y] = True
-    for x in range(W):
-        for y in range(H):
-            if not blocked[x, y] and ((wall(x - 1, y) and wall(x + 1, y) and wall(x - 2, y) and wall(x + 2, y))
-                                      or (wall(x, y - 1) and wall(x, y + 1) and wall(x, y - 2) and wall(x, y + 2))):
-                blocked[x, y] = True
+    free = (~blocked).tolist()                           # plain lists: the walk below indexes cell by cell
+    label = [[-1] * H for _ in range(W)]
     n = 0
     for x0 in range(W):
         for y0 in range(H):
-            if blocked[x0, y0] or label[x0, y0] >= 0:
+            if not free[x0][y0] or label[x0][y0] >= 0:
                 continue
-            label[x0, y0] = n
+            label[x0][y0] = n
             queue = deque([(x0, y0)])
             while queue:
                 x, y = queue.popleft()
                 for dx, dy in _NEIGHBOURS:
                     u, v = x + dx, y + dy
-                    if 0 <= u < W and 0 <= v < H and not blocked[u, v] and label[u, v] < 0:
-                        label[u, v] = n
+                    if 0 <= u < W and 0 <= v < H and free[u][v] and label[u][v] < 0:
+                        label[u][v] = n
                         queue.append((u, v))
             n += 1
-    return label
+    return np.array(label, np.int32)
 
 
 def route_doors(walls: np.ndarray, doors: dict[Cell, int], start: Cell, goal: Cell | None) -> tuple[int, ...]:
@@ -214,6 +215,7 @@ def route_doors(walls: np.ndarray, doors: dict[Cell, int], start: Cell, goal: Ce
     if goal is None:
         return ()
     W, H = walls.shape
+    wall = walls.tolist()
     parent: dict[Cell, Cell | None] = {start: None}
     queue = deque([start])
     while queue:
@@ -222,7 +224,7 @@ def route_doors(walls: np.ndarray, doors: dict[Cell, int], start: Cell, goal: Ce
             break
         for dx, dy in _NEIGHBOURS:
             nxt = (cell[0] + dx, cell[1] + dy)
-            if 0 <= nxt[0] < W and 0 <= nxt[1] < H and not walls[nxt] and nxt not in parent:
+            if 0 <= nxt[0] < W and 0 <= nxt[1] < H and not wall[nxt[0]][nxt[1]] and nxt not in parent:
                 parent[nxt] = cell
                 queue.append(nxt)
     if goal not in parent:

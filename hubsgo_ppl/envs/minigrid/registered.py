@@ -48,9 +48,6 @@ from .kinds import Kind, Scene, compile_kind, new_scene
 
 __all__ = ["RegisteredOptions", "RegisteredEnv", "is_registered", "make_minigrid"]
 
-#: the actions that can move, take, leave or open an object (the others never change the objects)
-_INTERACT = (Actions.pickup, Actions.drop, Actions.toggle, Actions.done)
-
 
 class RegisteredOptions(StrictModel):
     """The ``options`` of a minigrid catalogue that names a registered environment."""
@@ -201,18 +198,19 @@ class RegisteredEnv(gym.Env):
         return int(x), int(y)
 
     def _rescan(self) -> None:
-        """Re-read the objects (after reset, or an action that may move, take, drop or open one) and
-        the window's map: channel 0, cannot step there (wall, closed door, object on the floor, outside);
-        channel 1, lava."""
+        """Re-read the objects and the window's map: channel 0, where the agent cannot step (a wall, a
+        closed door, an object on the floor, outside the grid); channel 1, lava."""
         s = self.scene
-        if s.version:
-            s.reread(self.inner.grid, self.inner.carrying)
         pad = egocentric.VIEW // 2
-        W, H = s.walls.shape
-        grid = np.zeros((2, W + 2 * pad, H + 2 * pad), np.float32)
-        grid[0] = 1.0
-        grid[0, pad:pad + W, pad:pad + H] = s.walls
-        grid[1, pad:pad + W, pad:pad + H] = s.lava
+        if s.version == 0:          # just reset: walls and lava, once per episode
+            W, H = s.walls.shape
+            base = np.zeros((2, W + 2 * pad, H + 2 * pad), np.float32)
+            base[0] = 1.0
+            base[0, pad:pad + W, pad:pad + H] = s.walls
+            base[1, pad:pad + W, pad:pad + H] = s.lava
+            self._base = base
+        s.reread(self.inner.grid, self.inner.carrying)
+        grid = self._base.copy()
         for obj, (x, y) in s.objects:
             if obj.type not in ("goal", "floor", "lava") and not (obj.type == "door" and obj.is_open):
                 grid[0, x + pad, y + pad] = 1.0
@@ -234,8 +232,7 @@ class RegisteredEnv(gym.Env):
         _, reward, terminated, truncated, _ = self.inner.step(act)
         s = self.scene
         s.agent = self._agent_cell()
-        if act in _INTERACT:
-            self._rescan()
+        self._rescan()          # every step: some environments move their objects themselves (DynamicObstacles)
         s.success = bool(terminated) and reward > 0
         return (self._obs(), float(reward), bool(terminated), bool(truncated),
                 {"subgoals": self.subgoal_achieved(), "is_success": s.success})
