@@ -224,3 +224,24 @@ def test_tiny_run_on_each_shipped_registered_catalogue(task, tmp_path):
     run = tmp_path / task
     assert main(["train", task, "--steps", "300", "--out", str(run), "--no-progress"]) == 0
     assert (run / "checkpoint.pt").is_file() and (run / "subgoals.json").is_file()
+
+
+def test_a_subset_of_the_subgoals_keeps_the_observation_and_the_targets():
+    from hubsgo_ppl.envs.subset import make_subset
+
+    full, sub = make("unlockpickup"), make_subset("unlockpickup", ["key", "door", "goal"])
+    a, info_a = full.reset(seed=4)
+    b, info_b = sub.reset(seed=4)
+    assert np.array_equal(a, b) and sub.subgoal_names == ["key", "door", "goal"]
+    assert info_b["subgoals"].tolist() == info_a["subgoals"][[0, 1, 4]].tolist()
+    assert [sub.subgoal_target(i) for i in range(3)] == [full.subgoal_target(i) for i in (0, 1, 4)]
+
+
+def test_a_run_on_a_registered_catalogue_resumes_and_is_read(tmp_path, capsys):
+    run = tmp_path / "run"
+    assert main(["train", "fourrooms", "--steps", "200", "--out", str(run), "--no-progress"]) == 0
+    assert main(["train", "fourrooms", "--steps", "400", "--out", str(run), "--resume", "--no-progress"]) == 0
+    assert main(["evaluate", str(run), "--episodes", "2"]) == 0
+    assert main(["subgoals", str(run)]) == 0
+    out = capsys.readouterr().out
+    assert "goal_room" in out and "optimal" not in out
