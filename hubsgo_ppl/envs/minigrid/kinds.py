@@ -337,7 +337,8 @@ def _compile(name: str, kind: str, args: Any) -> Kind:
         if args.cell is not None:
             spot = tuple(args.cell)
             return Kind(name, kind, lambda s: s.agent == spot, lambda s: spot)
-        return Kind(name, kind, lambda s: any(_dist(c, s.agent) <= 1 for c in cells(s)), lambda s: _nearest(s, cells(s)))
+        return Kind(name, kind, lambda s: any(_dist(c, s.agent) <= 1 for c in cells(s)),
+                    lambda s: _nearest(s, cells(s)))
     raise AssertionError(kind)
 
 
