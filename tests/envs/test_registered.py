@@ -145,6 +145,7 @@ def test_goal_holds_on_success_and_aims_at_the_goal_or_else_the_mission_object()
     ({"kind": "carrying", "args": {"type": "door"}}, "subgoals[0] (g).args.type"),
     ({"kind": "carrying", "args": {"color": "pink"}}, "unknown colour 'pink'"),
     ({"kind": "door_open", "args": {"route": 0}}, "counts doors from 1"),
+    ({"kind": "door_open", "args": {"cell": [1, 2]}}, "rather than by cell"),
     ({"kind": "at", "args": {}}, "give either cell"),
     ({"kind": "in_room", "args": {}}, "subgoals[0] (g).args.type"),
     ({"kind": "cleared", "args": {"type": "ball", "locked": True}}, "locked applies to doors only"),

@@ -349,6 +349,9 @@ def compile_kind(i: int, sg: Any, source: str) -> Kind:
     if sg.kind not in KINDS:
         raise SpecError(f"{source}: {key}.kind: unknown kind {sg.kind!r} for a registered MiniGrid environment; "
                         f"use one of: {', '.join(KINDS)}")
+    if "cell" in sg.args and sg.kind != "at":
+        raise SpecError(f"{source}: {key}.args.cell: the layout changes at every reset, so a {sg.kind} names its "
+                        "object by type, color (and locked, route for doors) rather than by cell")
     try:
         args = KINDS[sg.kind].model_validate(sg.args)
     except ValidationError as err:
