@@ -138,6 +138,8 @@ def test_goal_holds_on_success_and_aims_at_the_goal_or_else_the_mission_object()
     box = Box("red")
     s = new_scene(two_rooms(Door("yellow"), right=[(box, (6, 1))]), (1, 1), mission_obj=box)
     assert goal.target(s) == (6, 1)
+    assert goal.target(new_scene(two_rooms(Door("yellow")), (1, 1), mission_cell=np.array([3, 1]))) == (3, 1)
+    assert goal.target(new_scene(two_rooms(Door("yellow")), (1, 1))) == (1, 1)
 
 
 @pytest.mark.parametrize("sg, fragment", [

@@ -12,7 +12,7 @@ cell where nothing is left to reach. docs/minigrid.md is the catalogue reference
 kind and args                              holds when / target
 =========================================  ===============================================================
 ``goal {}``                                the environment reports success (MiniGrid's positive reward on
-                                           termination) / the goal square, else the mission's object
+                                           termination) / the goal square, else the mission's object or cell
 ``carrying {type?, color?}``               the agent carries a matching object / the nearest one on the floor
 ``door_open {color?, locked?, route?}``    a matching door is open (``locked: true``: one locked at reset;
                                            ``route: k``: the k-th door on the shortest walk from the start to
@@ -128,6 +128,7 @@ class Scene:
     rooms: np.ndarray | None = None                      # (W, H) room label, -1 off the floor
     route: tuple[int, ...] = ()                          # id() of the doors on the start-goal walk, in order
     mission_obj: Any = None                              # the env's ``obj`` (the object to fetch), if any
+    mission_cell: Cell | None = None                     # the env's ``target_pos`` (the cell to go to), if any
     version: int = 0                                     # raised whenever ``objects`` is read again
     walls: np.ndarray | None = None                      # (W, H) bool
     lava: np.ndarray | None = None                       # (W, H) bool
@@ -140,10 +141,13 @@ class Scene:
         self.version += 1
 
 
-def new_scene(grid: Any, agent: Cell, carrying: Any = None, mission_obj: Any = None) -> Scene:
+def new_scene(grid: Any, agent: Cell, carrying: Any = None, mission_obj: Any = None,
+              mission_cell: Any = None) -> Scene:
     """The scene of a freshly reset ``grid`` (a MiniGrid ``Grid``): what is locked, the boxes, the rooms
     and the doors on the way from ``agent`` to the goal are recorded from it."""
-    s = Scene(grid.width, grid.height, [], None, (int(agent[0]), int(agent[1])), mission_obj=mission_obj)
+    cell = None if mission_cell is None else (int(mission_cell[0]), int(mission_cell[1]))
+    s = Scene(grid.width, grid.height, [], None, (int(agent[0]), int(agent[1])), mission_obj=mission_obj,
+              mission_cell=cell)
     s.objects, s.walls, s.lava = scan(grid)
     s.carrying = carrying
     doors = {cell: id(obj) for obj, cell in s.objects if obj.type == "door"}
@@ -265,7 +269,8 @@ class Kind:
 
 
 def goal_cell(s: Scene) -> Cell | None:
-    """The goal square nearest the agent, else the mission's object (carried: the agent's cell), else None."""
+    """The goal square nearest the agent, else the mission's object (carried: the agent's cell), else the
+    mission's cell, else None."""
     goals = [cell for obj, cell in s.objects if obj.type == "goal"]
     if goals:
         return _nearest(s, goals)
@@ -275,7 +280,7 @@ def goal_cell(s: Scene) -> Cell | None:
         for obj, cell in s.objects:
             if obj is s.mission_obj:
                 return cell
-    return None
+    return s.mission_cell
 
 
 def _compile(name: str, kind: str, args: Any) -> Kind:

@@ -219,7 +219,7 @@ class RegisteredEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         self.inner.reset(seed=seed, options=options)
         self.scene = new_scene(self.inner.grid, self._agent_cell(), self.inner.carrying,
-                               getattr(self.inner, "obj", None))
+                               getattr(self.inner, "obj", None), getattr(self.inner, "target_pos", None))
         self._rescan()
         return self._obs(), {"subgoals": self.subgoal_achieved(), "is_success": False}
 
