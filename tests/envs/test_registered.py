@@ -251,3 +251,39 @@ def test_a_run_on_a_registered_catalogue_resumes_and_is_read(tmp_path, capsys):
     assert main(["subgoals", str(run)]) == 0
     out = capsys.readouterr().out
     assert "goal_room" in out and "optimal" not in out
+
+
+@pytest.mark.parametrize("gym_id", ["MiniGrid-ObstructedMaze-1Dlhb-v0", "MiniGrid-RedBlueDoors-6x6-v0",
+                                    "MiniGrid-LavaGapS5-v0", "MiniGrid-Dynamic-Obstacles-5x5-v0",
+                                    "MiniGrid-GoToDoor-5x5-v0", "BabyAI-KeyCorridorS3R1-v0"])
+def test_every_kind_runs_on_environments_no_catalogue_here_was_written_for(tmp_path, gym_id):
+    path = tmp_path / "any.yaml"
+    path.write_text(textwrap.dedent(f"""\
+        task: any
+        family: minigrid
+        options: {{gym_id: {gym_id}, actions: [left, right, forward, pickup, drop, toggle]}}
+        subgoals:
+          - {{name: key, kind: carrying, args: {{type: key}}}}
+          - {{name: door, kind: door_open, args: {{locked: true}}}}
+          - {{name: first, kind: door_open, args: {{route: 1}}}}
+          - {{name: box, kind: box_open}}
+          - {{name: clear, kind: cleared}}
+          - {{name: room, kind: in_room, args: {{type: goal}}}}
+          - {{name: near, kind: at, args: {{type: door}}}}
+          - {{name: goal, kind: goal}}
+        """))
+    env = make(str(path))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert check_env(env, steps=40) == []
+    rng = np.random.default_rng(0)
+    for seed in range(3):
+        obs, _ = env.reset(seed=seed)
+        for _ in range(40):
+            obs, _, terminated, truncated, info = env.step(int(rng.integers(env.action_space.n)))
+            assert obs.shape == env.observation_space.shape and np.abs(obs).max() <= 1.0
+            for i in range(8):
+                x, y = env.subgoal_target(i)
+                assert 0 <= x < env.width and 0 <= y < env.height
+            if terminated or truncated:
+                break
