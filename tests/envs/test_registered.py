@@ -251,6 +251,9 @@ def test_a_run_on_a_registered_catalogue_resumes_and_is_read(tmp_path, capsys):
     assert main(["subgoals", str(run)]) == 0
     out = capsys.readouterr().out
     assert "goal_room" in out and "optimal" not in out
+    assert main(["tasks", "fourrooms"]) == 0           # no layout to search: no reachability line
+    out = capsys.readouterr().out
+    assert "MiniGrid's FourRooms" in out and "reachability" not in out and "valid for this task" in out
 
 
 @pytest.mark.parametrize("gym_id", ["MiniGrid-ObstructedMaze-1Dlhb-v0", "MiniGrid-RedBlueDoors-6x6-v0",
