@@ -34,7 +34,9 @@ def _check_task(name: str, info: Any, model: str | None) -> None:
     and the critic spec the run would use."""
     from ..experiments.run import RunConfig, resolve
 
-    if info.family == "minigrid":
+    from ..envs.minigrid.registered import is_registered
+
+    if info.family == "minigrid" and not is_registered(info.catalogue):
         from ..envs.minigrid.bfs import check_reachable, optimal_steps_range
 
         never = check_reachable(name)       # a goal no sequence reaches: SpecError

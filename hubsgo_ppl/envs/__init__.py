@@ -24,7 +24,7 @@ __all__ = ["TaskInfo", "Catalogue", "SubgoalDef", "load_catalogue", "tasks", "ge
 
 # family -> entry point of the env class that takes (catalogue=..., **kwargs)
 _FAMILY_ENTRY = {
-    "minigrid": "hubsgo_ppl.envs.minigrid.maze:MazeEnv",
+    "minigrid": "hubsgo_ppl.envs.minigrid.registered:make_minigrid",     # a layout (MazeEnv) or a gym_id
     "robosuite": "hubsgo_ppl.envs.robosuite.gym_wrapper:make_robosuite_task",
     "gym": "hubsgo_ppl.envs.gym_task:GymTask",          # any Gymnasium env (envs/gym_task.py)
 }

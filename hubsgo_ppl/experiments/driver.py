@@ -169,7 +169,9 @@ def _resume(cfg: RunConfig, out: Path):
 
 def _new(run: ResolvedRun, out: Path, cfg: RunConfig | None, started: bool, resumed: bool):
     """A run started afresh (``cfg``: the user's request, for --init-from and --set; None on a resume)."""
-    if run.family == "minigrid" and is_catalogue(run.task_ref) and not resumed:
+    from ..envs.minigrid.registered import is_registered
+
+    if run.family == "minigrid" and is_catalogue(run.task_ref) and not resumed and not is_registered(run.task_ref):
         from ..envs.minigrid.bfs import check_reachable
 
         never = check_reachable(run.task_ref)     # a maze whose goal cannot be reached: SpecError

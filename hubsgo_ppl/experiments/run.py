@@ -86,10 +86,11 @@ def evaluate(run_dir: str | Path, episodes: int = 10, seed: int | None = None,
     with contextlib.closing(env):
         base = int(resolved["seed"]) + EVAL_SEED_OFFSET if seed is None else int(seed)
         rets, succ, lengths, optimal = [], [], [], []
-        if resolved["family"] == "minigrid":
+        maze = resolved["family"] == "minigrid" and hasattr(env.unwrapped, "spec_maze")    # an ASCII layout
+        if maze:
             from ..envs.minigrid.bfs import optimal_return
         for i in range(episodes):
-            if resolved["family"] == "minigrid":      # BFS from this episode's start state
+            if maze:      # BFS from this episode's start state
                 env.reset(seed=episode_seed(base, i))
                 optimal.append(float(optimal_return(env)))
             stats = agent.run_episode(train=False, seed=episode_seed(base, i))

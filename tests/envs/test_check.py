@@ -45,7 +45,7 @@ class Corridor(gym.Env):
 
 
 def test_every_shipped_maze_meets_the_contract():
-    mazes = [name for name, info in tasks().items() if info.family == "minigrid"]
+    mazes = [name for name, info in tasks().items() if info.family == "minigrid" and "layout" in info.catalogue.options]
     assert len(mazes) >= 20
     for name in mazes:
         env = make(name)

@@ -397,6 +397,9 @@ def _build(cat: Catalogue) -> MazeSpec:
     source = cat.source
     if cat.family != "minigrid":
         raise _err(source, "family", f"{cat.family!r} is not a minigrid task; use family: minigrid")
+    if isinstance(cat.options, dict) and "gym_id" in cat.options:
+        raise _err(source, "options.gym_id", "a registered MiniGrid environment is generated again at every reset, so "
+                   "it has no fixed layout to read or search; build it with envs.make (RegisteredEnv)")
     try:
         opts = _OptionsHolder.model_validate({"options": cat.options}).options
     except ValidationError as err:
