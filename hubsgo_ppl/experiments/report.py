@@ -8,6 +8,13 @@ Curves: each run's episodes are binned by ``env_steps`` (``bins`` equal bins up 
 step count); a run's value in a bin is the mean return of its episodes ending there (carried forward
 through bins where no episode ended); the band is ± one standard error across seeds.
 
+Beside it, the success table: for each run the **env steps until 90% success** (the first episode end
+at which the success rate over the last ``SUCCESS_WINDOW`` episodes reaches 0.9), the **success rate over
+the last 10% of the budget** (episodes ending in the last tenth of the run's env steps) and, for runs with
+a critic, **G*** (the most probable set of ``subgoals.json``); per cell, the steps as mean ± s.e. over the
+seeds that got there with how many did, the success rate as mean ± s.e. over every seed, and each G*
+with the number of seeds that read it.
+
 Both are pandas group-bys: runs by (variant, task) for the tables, episodes by ``pd.cut`` bin for a
 run's curve (then ``reindex``/``ffill``), and a bins x runs frame's row mean/std for the band.
 """
@@ -28,7 +35,11 @@ import yaml
 from .io import atomic_write, write_text
 from .logger import read_csv_rows
 
-__all__ = ["ReportError", "RunSummary", "Cell", "PAPER", "collect", "aggregate", "markdown_table", "curves", "write_report"]
+__all__ = ["ReportError", "RunSummary", "Cell", "PAPER", "SUCCESS_WINDOW", "collect", "aggregate", "markdown_table",
+           "steps_to_success", "success_table", "curves", "write_report"]
+
+#: episodes in the rolling success rate of "steps until 90% success" (the loop's ``outcome_window``)
+SUCCESS_WINDOW = 20
 
 #: The paper's reported numbers (mean, s.e.) by table, row label and task.
 PAPER: dict[str, dict[str, dict[str, tuple[float, float]]]] = {
@@ -73,6 +84,39 @@ class RunSummary:
     success_rate: float
     steps: np.ndarray            # per episode
     returns: np.ndarray
+    successes: np.ndarray | None = None     # per episode, 0/1
+    g_star: tuple[str, ...] | None = None   # the most probable set of subgoals.json, where the run has one
+
+
+def steps_to_success(steps: np.ndarray, successes: np.ndarray, rate: float = 0.9,
+                     window: int = SUCCESS_WINDOW) -> int | None:
+    """Env steps at the first episode end where the success rate of the last ``window`` episodes is at
+    least ``rate`` (None if it never is; fewer than ``window`` episodes never count)."""
+    s = np.asarray(successes, dtype=float)
+    if len(s) < window:
+        return None
+    rolling = np.convolve(s, np.ones(window), "valid") / window     # rolling[i] ends at episode i + window - 1
+    hit = np.flatnonzero(rolling >= rate - 1e-12)
+    return None if hit.size == 0 else int(steps[hit[0] + window - 1])
+
+
+def _late_success(r: "RunSummary") -> float:
+    """Success rate of the episodes ending in the last 10% of the run's env steps (its last episode if none)."""
+    late = r.steps >= 0.9 * r.steps[-1]
+    return float(np.mean(r.successes[late])) if late.any() else float(r.successes[-1])
+
+
+def _g_star(run: Path) -> tuple[str, ...] | None:
+    path = run / "subgoals.json"
+    if not path.is_file():
+        return None
+    try:
+        import json
+
+        ranking = json.loads(path.read_text(encoding="utf-8"))["ranking"]
+        return tuple(ranking[0]["subgoals"]) if ranking else None
+    except (ValueError, KeyError, IndexError, TypeError):
+        return None
 
 
 @dataclass
@@ -129,7 +173,8 @@ def collect(sweep_dir: str | Path) -> list[RunSummary]:
                              "expected columns episode, env_steps, return, success") from None
         tail = rets[-max(1, len(rets) // 10):]
         out.append(RunSummary(run.parent.parent.name, run.parent.name, seed, len(rows), int(steps[-1]),
-                              float(rets.mean()), float(tail.mean()), float(succ.mean()), steps, rets))
+                              float(rets.mean()), float(tail.mean()), float(succ.mean()), steps, rets, succ,
+                              _g_star(run)))
     return out
 
 
@@ -160,6 +205,32 @@ def markdown_table(cells: dict[tuple[str, str], Cell], tasks: list[str], variant
         row = [_fmt(cells[(v, t)].mean, cells[(v, t)].se) if (v, t) in cells else "-" for t in tasks]
         if any(c != "-" for c in row):
             lines.append(f"| {labels.get(v, v)} | " + " | ".join(row) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def success_table(runs: list[RunSummary], tasks: list[str], variants: list[str], labels: dict[str, str]) -> str:
+    """The success table (module docstring): one row per (task, variant) with runs."""
+    lines = ["**Steps until 90% success, success over the last 10% of the budget, and G\\***", "",
+             f"Steps: mean ± s.e. over the seeds whose rolling success ({SUCCESS_WINDOW} episodes) reached 0.9, "
+             "with how many of the seeds did. G*: each set read, with its number of seeds.", "",
+             "| task | Algorithm | steps to 90% | seeds at 90% | success, last 10% | G* |", "|---|---|---|---|---|---|"]
+    for t in tasks:
+        for v in variants:
+            mine = [r for r in runs if r.task == t and r.variant == v and r.successes is not None]
+            if not mine:
+                continue
+            hits = [s for s in (steps_to_success(r.steps, r.successes) for r in mine) if s is not None]
+            late = np.array([_late_success(r) for r in mine])
+            reached = "-" if not hits else (f"{np.mean(hits):,.0f}" + (f" ± {np.std(hits, ddof=1) / np.sqrt(len(hits)):,.0f}"
+                                                                       if len(hits) > 1 else ""))
+            se = late.std(ddof=1) / np.sqrt(len(late)) if len(late) > 1 else float("nan")
+            sets: dict[tuple[str, ...], int] = {}
+            for r in mine:
+                if r.g_star is not None:
+                    sets[r.g_star] = sets.get(r.g_star, 0) + 1
+            g = "; ".join(f"{{{', '.join(k)}}} {n}/{len(mine)}" for k, n in sorted(sets.items(), key=lambda kv: -kv[1]))
+            lines.append(f"| {t} | {labels.get(v, v)} | {reached} | {len(hits)}/{len(mine)} | "
+                         f"{_fmt(float(late.mean()), float(se))} | {g or '-'} |")
     return "\n".join(lines) + "\n"
 
 
@@ -276,6 +347,7 @@ def write_report(sweep_dir: str | Path, out: str | Path | None = None, bins: int
           "across seeds.", "", markdown_table(cells, tasks, variants, labels, f"{title}: this sweep")]
     if table in PAPER:
         md += ["", _paper_table(table, tasks, variants, labels)]
+    md += ["", success_table(runs, tasks, variants, labels)]
     paths: dict[str, Path] = {"table": write_text(out / "results.md", "\n".join(md))}
 
     rows: list[dict[str, Any]] = []
@@ -283,7 +355,10 @@ def write_report(sweep_dir: str | Path, out: str | Path | None = None, bins: int
         rows.append({"level": "run", "task": r.task, "variant": r.variant, "label": labels.get(r.variant, r.variant),
                      "seed": r.seed, "n": 1, "episodes": r.episodes, "env_steps": r.env_steps,
                      "avg_return": r.avg_return, "se": "", "final_return": r.final_return,
-                     "success_rate": r.success_rate})
+                     "success_rate": r.success_rate,
+                     "steps_to_90": steps_to_success(r.steps, r.successes) if r.successes is not None else "",
+                     "success_last_10pct": _late_success(r) if r.successes is not None else "",
+                     "g_star": " ".join(r.g_star) if r.g_star is not None else ""})
     for (v, t), c in sorted(cells.items(), key=lambda kv: (kv[0][1], kv[0][0])):
         ref = PAPER.get(table or "", {}).get(labels.get(v, v), {}).get(t)
         rows.append({"level": "aggregate", "task": t, "variant": v, "label": labels.get(v, v), "seed": "",

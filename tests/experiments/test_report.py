@@ -117,3 +117,35 @@ def test_report_limited_to_one_grid_of_a_shared_folder(sweep_dir, tmp_path):
     assert "fourroom" not in ours and "PPO" not in ours and "lonely" not in ours
     with paths["csv"].open() as fh:
         assert sum(r["level"] == "run" for r in csv.DictReader(fh)) == 2
+
+
+def test_steps_to_success_is_the_first_episode_end_where_the_rolling_rate_reaches_the_threshold():
+    from hubsgo_ppl.experiments.report import steps_to_success
+
+    steps = np.arange(1, 31) * 100                       # episode i ends at 100 (i + 1)
+    succ = np.zeros(30)
+    assert steps_to_success(steps, succ) is None
+    succ[5:] = 1                                         # episodes 5..29 succeed
+    # window of 20 ending at episode e holds e - 4 successes for e in 19..24: 18 (90%) first at e = 22
+    assert steps_to_success(steps, succ) == 2300
+    assert steps_to_success(steps, succ, rate=1.0) == 2500   # 20/20 first at e = 24
+    assert steps_to_success(steps[:19], np.ones(19)) is None  # fewer episodes than the window
+
+
+def test_the_success_table_counts_seeds_at_90_percent_and_reads_g_star(tmp_path):
+    import json
+
+    root = tmp_path / "sweep"
+    n = 40
+    for seed, first in ((0, 0), (1, 10), (2, n)):        # seed 2 never succeeds
+        run = root / "keydoor" / "hubsgo-specific" / f"seed{seed}"
+        _metrics(run, list(range(100, 100 * (n + 1), 100)), [0.0] * first + [0.9] * (n - first))
+        top = ["key", "goal"] if seed < 2 else ["goal"]
+        (run / "subgoals.json").write_text(json.dumps({"ranking": [{"subgoals": top, "prob": 0.8}]}))
+    md = (write_report(root, out=tmp_path / "rep")["table"]).read_text()
+    row = next(line for line in md.splitlines() if line.startswith("| keydoor |"))
+    # seed 0 reaches 18/20 at episode 19 (step 2000); seed 1 at episode 27 (step 2800): 2400 ± 400
+    assert "| 2,400 ± 400 | 2/3 |" in row
+    # last 10% of 4000 steps: episodes ending at >= 3600 (5 episodes): 1, 1, 0 -> 0.6667 ± 0.3333
+    assert "0.6667 ± 0.3333" in row
+    assert "{key, goal} 2/3; {goal} 1/3" in row
