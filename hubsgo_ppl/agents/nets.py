@@ -52,6 +52,7 @@ class TargetNetwork:
         self.target.load_state_dict(self.online.state_dict())
         self.opt = torch.optim.Adam(self.online.parameters(), lr=lr)
         self.tau, self.grad_clip = tau, grad_clip
+        self.stacked = False    # the weights and Adam state are views of a stack of seeds' (agents/stacked.py)
 
     def step(self, loss: torch.Tensor) -> None:
         """One Adam step on ``loss`` (gradients clipped to norm ``grad_clip`` where given), then Polyak."""
@@ -63,10 +64,28 @@ class TargetNetwork:
         polyak_update(self.online.parameters(), self.target.parameters(), self.tau)
 
     def state_dict(self, online: str = "q", target: str = "q_target", opt: str = "opt") -> dict[str, Any]:
-        """The three states under the names a learner's checkpoint uses."""
-        return {online: self.online.state_dict(), target: self.target.state_dict(), opt: self.opt.state_dict()}
+        """The three states under the names a learner's checkpoint uses (copies of a stacked network's
+        slices, so that a checkpoint holds only its own seed)."""
+        s = {online: self.online.state_dict(), target: self.target.state_dict(), opt: self.opt.state_dict()}
+        if self.stacked:
+            s = _cloned(s)
+        return s
 
     def load_state_dict(self, s: dict[str, Any], online: str = "q", target: str = "q_target", opt: str = "opt") -> None:
         self.online.load_state_dict(s[online])
         self.target.load_state_dict(s[target])
         self.opt.load_state_dict(s[opt])
+
+
+def _cloned(x: Any) -> Any:
+    """``x`` with every tensor in its dicts and lists copied."""
+    if isinstance(x, torch.Tensor):
+        return x.clone()
+    if isinstance(x, dict):
+        out = type(x)((k, _cloned(v)) for k, v in x.items())
+        if hasattr(x, "_metadata"):     # a module's state_dict: its layout versions
+            out._metadata = x._metadata
+        return out
+    if isinstance(x, list):
+        return [_cloned(v) for v in x]
+    return x
