@@ -89,7 +89,7 @@ class TargetNetwork:
         """torch.optim.Adam's step (no weight decay, amsgrad or maximize: the learners' settings), as
         its single-tensor implementation computes it, on the optimiser's own state."""
         group = self.opt.param_groups[0]
-        if (len(self.opt.param_groups) != 1 or group["weight_decay"] or group["amsgrad"] or group["maximize"]
+        if (type(self.opt) is not torch.optim.Adam or len(self.opt.param_groups) != 1 or group.get("weight_decay") or group.get("amsgrad") or group.get("maximize")
                 or group.get("decoupled_weight_decay")):
             self.opt.step()
             return

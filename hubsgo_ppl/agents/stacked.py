@@ -52,7 +52,7 @@ class StackedNets:
         self.lr, (self.beta1, self.beta2), self.eps = group["lr"], group["betas"], group["eps"]
         bad = [g for n in nets for g in n.opt.param_groups
                if (g["lr"], g["betas"], g["eps"]) != (self.lr, (self.beta1, self.beta2), self.eps)
-               or g["weight_decay"] or g["amsgrad"] or g["maximize"]]
+               or g.get("weight_decay") or g.get("amsgrad") or g.get("maximize")]
         if bad or any((n.tau, n.grad_clip) != (nets[0].tau, nets[0].grad_clip) for n in nets):
             raise ValueError("stacked networks need the same optimiser settings, Polyak rate and clipping")
         self.tau, self.grad_clip = nets[0].tau, nets[0].grad_clip
