@@ -23,7 +23,7 @@ from __future__ import annotations
 import contextlib
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import torch
 
@@ -42,26 +42,31 @@ def seed_folders(out: Path, seeds: Sequence[int]) -> list[Path]:
     return [Path(out) / f"seed{s}" for s in seeds]
 
 
-def train_seeds(cfg: RunConfig, seeds: Sequence[int], outs: Sequence[Path], resume: bool = False,
-                progress: bool = True) -> list[dict[str, Any]]:
+def train_seeds(cfg: RunConfig, seeds: Sequence[int], outs: Sequence[Path], resume: bool | Sequence[bool] = False,
+                progress: bool = True, on_episode: Sequence[Callable[[Any], Any] | None] | None = None
+                ) -> list[dict[str, Any]]:
     """Train (or resume) the run ``cfg`` for each of ``seeds`` into ``outs``, in lockstep where the
-    agent allows; returns each seed's summary, as :func:`~.driver.train` does."""
+    agent allows; returns each seed's summary, as :func:`~.driver.train` does. ``resume``: one flag for
+    every seed, or one per seed; ``on_episode``: a function per seed called after each of its episodes."""
     seeds, outs = [int(s) for s in seeds], [Path(o) for o in outs]
+    resumes = [bool(resume)] * len(seeds) if isinstance(resume, bool) else [bool(r) for r in resume]
+    hooks = list(on_episode) if on_episode is not None else [None] * len(seeds)
     if len(set(seeds)) != len(seeds):
         raise RunError(f"--seeds lists a seed twice: {' '.join(map(str, seeds))}")
     if len(outs) != len(seeds) or len(set(outs)) != len(outs):
         raise RunError("each seed needs a run folder of its own")
     if len(seeds) == 1:
-        return [train(replace(cfg, seed=seeds[0]), outs[0], resume=resume, progress=progress)]
+        return [train(replace(cfg, seed=seeds[0]), outs[0], resume=resumes[0], progress=progress,
+                      on_episode=hooks[0])]
     wheres = [{"phase": "start", "task": str(cfg.task)} for _ in seeds]
     try:
         torch.set_num_threads(int(cfg.threads))
         with contextlib.ExitStack() as closing:
             for out in outs:
                 closing.enter_context(run_folder_lock(out))
-            sessions = [RunSession(replace(cfg, seed=seed), out, resume,
-                                   default_callbacks(None, None, progress and i == 0, None), where, closing)
-                        for i, (seed, out, where) in enumerate(zip(seeds, outs, wheres))]
+            sessions = [RunSession(replace(cfg, seed=seed), out, again,
+                                   default_callbacks(None, None, progress and i == 0, hook), where, closing)
+                        for i, (seed, out, again, hook, where) in enumerate(zip(seeds, outs, resumes, hooks, wheres))]
             return _Lockstep(sessions).play()
     except KeyboardInterrupt:
         raise RunError("; ".join(f"seed {s}: {_interrupted(out, w)}" for s, out, w in zip(seeds, outs, wheres))) \
