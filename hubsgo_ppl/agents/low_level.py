@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 from .buffers import ReplayBuffer
-from .nets import TargetNetwork, mlp
+from .nets import TargetNetwork, forward, mlp
 from .protocols import Controller, LowLevel, LowLevelBase
 from .settings import GoalDQNConfig
 
@@ -52,7 +52,7 @@ class GoalDQN(LowLevelBase):
 
     def _q(self, net: torch.nn.Module, obs: torch.Tensor) -> torch.Tensor:
         """(..., N, A) values of every action towards every sub-goal."""
-        return net(obs).view(*obs.shape[:-1], self.n_goals, self.n_actions)
+        return forward(net, obs).view(*obs.shape[:-1], self.n_goals, self.n_actions)
 
     def act(self, obs: np.ndarray, goal: int, explore_eps: float, env: gym.Env | None = None) -> int:
         """ε-greedy in Q(obs, goal, ·); ``self.explored`` says whether this action was the random one."""

@@ -9,7 +9,7 @@ from typing import Any, Callable, Sequence
 import torch
 from torch import nn
 
-__all__ = ["mlp", "seeded_init_", "TargetNetwork"]
+__all__ = ["mlp", "seeded_init_", "TargetNetwork", "forward"]
 
 
 def mlp(in_dim: int, hidden: Sequence[int], out_dim: int, generator: torch.Generator) -> nn.Sequential:
@@ -34,6 +34,23 @@ def seeded_init_(module: nn.Module, generator: torch.Generator) -> nn.Module:
             m.weight.uniform_(-bound, bound, generator=generator)
             m.bias.uniform_(-bound, bound, generator=generator)
     return module
+
+
+def forward(net: nn.Module, x: torch.Tensor) -> torch.Tensor:
+    """``net(x)`` for an :func:`mlp`, the same operations without the modules' call machinery (it runs
+    a few times per env step); any other module is called as usual."""
+    layers = net.__dict__.get("_plain_layers")
+    if layers is None:
+        mods = list(net) if isinstance(net, nn.Sequential) else []
+        plain = bool(mods) and all(type(m) in (nn.Linear, nn.ReLU) for m in mods) and not (
+            net._forward_hooks or net._forward_pre_hooks or any(m._forward_hooks or m._forward_pre_hooks for m in mods))
+        layers = [m if type(m) is nn.Linear else None for m in mods] if plain else []
+        net.__dict__["_plain_layers"] = layers
+    if not layers:
+        return net(x)
+    for m in layers:
+        x = torch.relu(x) if m is None else torch._C._nn.linear(x, m.weight, m.bias)
+    return x
 
 
 class TargetNetwork:

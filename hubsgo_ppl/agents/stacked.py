@@ -102,9 +102,12 @@ class StackedNets:
                 coef = torch.clamp(self.grad_clip / (total + 1e-6), max=1.0)
                 for g in grads:
                     g.mul_(coef.view(-1, *([1] * (g.dim() - 1))))
-            for j, (p, g) in enumerate(zip(self.params, grads)):
-                self._adam(j, p, g, sel, full)
-            for j, (p, t) in enumerate(zip(self.params, self.targets)):   # Polyak (SB3's polyak_update)
+            if full:
+                self._adam_full(grads)
+            else:
+                for j, (p, g) in enumerate(zip(self.params, grads)):
+                    self._adam(j, p, g, sel)
+            for p, t in zip(self.params, self.targets):     # Polyak (SB3's polyak_update)
                 if full:
                     t.mul_(1 - self.tau)
                     torch.add(t, p, alpha=self.tau, out=t)
@@ -112,27 +115,41 @@ class StackedNets:
                     t[sel] = t[sel].mul_(1 - self.tau).add_(p[sel], alpha=self.tau)
         return losses.detach()
 
-    def _adam(self, j: int, p: torch.Tensor, g: torch.Tensor, sel, full: bool) -> None:
-        """torch.optim.Adam's single-tensor step (no weight decay, no amsgrad) for the seeds ``sel``."""
+    def _corrections(self, steps: torch.Tensor, like: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Adam's -step size and sqrt of the second bias correction per seed, shaped to broadcast on ``like``."""
+        n = steps.double().numpy()
+        shape = (-1, *([1] * (like.dim() - 1)))
+        step_size = torch.as_tensor(-(self.lr / (1 - self.beta1 ** n)), dtype=like.dtype).view(shape)
+        bc2_sqrt = torch.as_tensor(np.sqrt(1 - self.beta2 ** n), dtype=like.dtype).view(shape)
+        return step_size, bc2_sqrt
+
+    def _adam_full(self, grads: list[torch.Tensor]) -> None:
+        """torch.optim.Adam's single-tensor step of every seed, every parameter."""
+        self.steps += 1
+        m, v = self.exp_avg, self.exp_avg_sq
+        torch._foreach_lerp_(m, grads, 1 - self.beta1)
+        torch._foreach_mul_(v, self.beta2)
+        torch._foreach_addcmul_(v, grads, grads, 1 - self.beta2)
+        corr = [self._corrections(self.steps[j], p) for j, p in enumerate(self.params)]
+        denom = torch._foreach_sqrt(v)
+        torch._foreach_div_(denom, [c[1] for c in corr])
+        torch._foreach_add_(denom, self.eps)
+        update = torch._foreach_mul(m, [c[0] for c in corr])
+        torch._foreach_div_(update, denom)
+        torch._foreach_add_(self.params, update)
+
+    def _adam(self, j: int, p: torch.Tensor, g: torch.Tensor, sel) -> None:
+        """torch.optim.Adam's single-tensor step of parameter j for the seeds ``sel``."""
         steps = self.steps[j, sel] + 1
         self.steps[j, sel] = steps
-        m = self.exp_avg[j] if full else self.exp_avg[j][sel]
-        v = self.exp_avg_sq[j] if full else self.exp_avg_sq[j][sel]
+        m, v = self.exp_avg[j][sel], self.exp_avg_sq[j][sel]
         m.lerp_(g, 1 - self.beta1)
         v.mul_(self.beta2).addcmul_(g, g, value=1 - self.beta2)
-        step = steps.double().numpy()
-        bc1, bc2 = 1 - self.beta1 ** step, 1 - self.beta2 ** step
-        shape = (-1, *([1] * (p.dim() - 1)))
-        step_size = torch.as_tensor(self.lr / bc1, dtype=p.dtype).view(shape)
-        bc2_sqrt = torch.as_tensor(np.sqrt(bc2), dtype=p.dtype).view(shape)
+        step_size, bc2_sqrt = self._corrections(steps, p)
         denom = (v.sqrt() / bc2_sqrt).add_(self.eps)
-        update = (m * -step_size) / denom
-        if full:
-            p.add_(update)
-        else:
-            p[sel] = p[sel] + update
-            self.exp_avg[j][sel] = m
-            self.exp_avg_sq[j][sel] = v
+        p[sel] = p[sel] + (m * step_size) / denom
+        self.exp_avg[j][sel] = m
+        self.exp_avg_sq[j][sel] = v
 
 
 class StackedGoalDQN:
