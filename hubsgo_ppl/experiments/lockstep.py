@@ -9,10 +9,11 @@ GoalDQN networks stacked (:class:`~hubsgo_ppl.agents.stacked.StackedGoalDQN`): o
 the greedy actions, one batched TD step for the seeds whose update is due. A seed's high level, critic
 and env run as in a run alone.
 
-A seed trained in lockstep is reproducible (the same seeds give the same files), but it is not
-bit-identical to the same seed trained alone: the batched products round differently in the last bits,
-and the runs drift apart once a greedy action or a replay draw turns on such a bit. Resume works per
-seed, as for a run alone: each folder continues from its own checkpoint.
+A seed trained in lockstep gives the files the same seed gives alone, to the bit, on the machines we
+measured (docs/benchmarks.md, "Seeds in lockstep"): the batched products give each seed's slice the
+floats of its own, and Adam, the clipping and the Polyak step are elementwise per seed. Resume works
+per seed, as for a run alone: each folder continues from its own checkpoint, and a seed whose updates
+fall on other env steps than the others' after a resume takes them with the seeds it shares them with.
 
 Agents other than the hierarchical ones with a learned grid low level (``hubsgo``, ``hdqn``) run their
 seeds one after another in the process.
