@@ -30,7 +30,7 @@ import torch
 
 from ..infer.tdbatch import TDBatch
 from .buffers import ReplayBuffer
-from .nets import TargetNetwork, mlp
+from .nets import TargetNetwork, forward, mlp
 from .settings import HighLevelConfig
 
 __all__ = ["HighLevelConfig", "HighLevelBatch", "HighLevelDQN", "masked_max"]
@@ -69,7 +69,7 @@ class HighLevelDQN:
     @torch.no_grad()
     def q_values(self, obs: np.ndarray) -> np.ndarray:
         """(..., N) values of every sub-goal."""
-        return self.q(torch.as_tensor(obs, dtype=torch.float32)).numpy()
+        return forward(self.q, torch.as_tensor(obs, dtype=torch.float32)).numpy()
 
     def select(self, obs: np.ndarray, allowed: np.ndarray, explore_eps: float) -> int:
         """ε-greedy over ``allowed`` (Sec. 3.4: g_t = argmax_{g' ∈ Ĝt | G0} Q(s_t, g'))."""
@@ -99,11 +99,11 @@ class HighLevelDQN:
         if callable(target_mask):
             target_mask = target_mask(~avail)
         with torch.no_grad():
-            q_next_t = self.q_target(b["next_obs"])
+            q_next_t = forward(self.q_target, b["next_obs"])
             mask = avail if target_mask is None else avail & torch.as_tensor(target_mask).bool()
             mask = torch.where(mask.any(-1, keepdim=True), mask, avail)   # empty Ĝt ∩ avail: fall back to G0
             if self.cfg.double_q:
-                q_next_online = self.q(b["next_obs"])
+                q_next_online = forward(self.q, b["next_obs"])
                 neg = torch.finfo(q_next_online.dtype).min
                 a_star = torch.where(mask, q_next_online, torch.full_like(q_next_online, neg)).argmax(-1)
                 boot = q_next_t.gather(1, a_star[:, None]).squeeze(1)
@@ -111,7 +111,7 @@ class HighLevelDQN:
             else:
                 boot = masked_max(q_next_t, mask)
             y = b["reward"] + b["discount"] * boot
-        q_taken = self.q(b["obs"]).gather(1, b["goal"][:, None]).squeeze(1)
+        q_taken = forward(self.q, b["obs"]).gather(1, b["goal"][:, None]).squeeze(1)
         loss = 0.5 * (y - q_taken).pow(2).mean()            # Eq. 2
         self.net.step(loss)
         self.updates += 1

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import fields
-from typing import Any
+from typing import Any, Generator
 
 import gymnasium as gym
 import numpy as np
@@ -37,7 +37,9 @@ from .schedules import LinearSchedule
 from .settings import LoopConfig
 from .seeding import EVAL_LOW_LEVEL_STREAM, LOOP_STREAM, episode_seed, stream_rng
 
-__all__ = ["LoopConfig", "EpisodeStats", "HRLLoop", "episode_seed"]
+__all__ = ["LoopConfig", "EpisodeStats", "HRLLoop", "episode_seed", "UPDATE_LOW"]
+
+UPDATE_LOW = "update_low"     # what HRLLoop.episode_steps yields where the low level's gradient step is due
 
 
 class HRLLoop:
@@ -125,6 +127,25 @@ class HRLLoop:
             self.low.rng = trained
 
     def _episode(self, train: bool, seed: int | None) -> EpisodeStats:
+        """One episode, the low level's actions and updates served here, one at a time."""
+        steps = self.episode_steps(train, seed)
+        low = self.low
+        request = next(steps)
+        try:
+            while True:
+                if request is UPDATE_LOW:
+                    request = steps.send(low.update())
+                else:
+                    request = steps.send(low.act(request[0], request[1], request[2], self.env))
+        except StopIteration as end:
+            return end.value
+
+    def episode_steps(self, train: bool, seed: int | None) -> Generator[Any, Any, EpisodeStats]:
+        """One episode as a generator: it yields ``(obs, g, explore_eps)`` where the low level must act
+        (send the action back) and :data:`UPDATE_LOW` where a learned GoalDQN low level's gradient step
+        is due (send its stats back); it returns the episode's statistics. :meth:`run_episode` serves
+        the requests one at a time; a lockstep runner (``experiments.lockstep``) serves several seeds'
+        requests together."""
         env, cfg = self.env, self.cfg
         obs, info = reset_episode(env, self.seed, self.episodes, seed)
         tally = EpisodeTally(self.episodes)     # the loop counts success from the steps, not the reset
@@ -135,6 +156,7 @@ class HRLLoop:
         greedy_at: set[tuple[int, bytes]] = set()   # (sub-goal, state) where the low level acted greedily
         breaking = self._break_cycles if train else self.eval_breaks_cycles
         revisits = 0
+        deferred = isinstance(self.low, GoalDQN)
         explore, low_explore, filter_eps = 0.0, 0.0, 1.0     # greedy evaluation: always from Ĝt
         done = False
         while not done:
@@ -153,13 +175,17 @@ class HRLLoop:
                     key = (g, np.asarray(obs).tobytes())
                     if key in greedy_at:
                         step_explore, revisits = 1.0, revisits + 1
-                action = self.low.act(obs, g, step_explore, env)
+                action = yield (obs, g, step_explore)
                 if key is not None and not self.low.explored:
                     greedy_at.add(key)
                 next_obs, reward, terminated, truncated, info = env.step(action)
                 next_achieved = np.asarray(info["subgoals"], dtype=bool)
                 if train and self.low.learns:
-                    tally.record(self.low.observe(obs, action, next_obs, achieved, next_achieved, terminated))
+                    if deferred:        # GoalDQN: its replay here, its gradient step where the runner serves it
+                        if self.low.store(obs, action, next_obs, achieved, next_achieved, terminated):
+                            tally.record((yield UPDATE_LOW))
+                    else:
+                        tally.record(self.low.observe(obs, action, next_obs, achieved, next_achieved, terminated))
                 R += (cfg.gamma ** k) * float(reward)
                 tally.step(reward, info)
                 k += 1

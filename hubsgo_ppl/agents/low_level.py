@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 from .buffers import ReplayBuffer
-from .nets import TargetNetwork, mlp
+from .nets import TargetNetwork, forward, mlp
 from .protocols import Controller, LowLevel, LowLevelBase
 from .settings import GoalDQNConfig
 
@@ -52,25 +52,34 @@ class GoalDQN(LowLevelBase):
 
     def _q(self, net: torch.nn.Module, obs: torch.Tensor) -> torch.Tensor:
         """(..., N, A) values of every action towards every sub-goal."""
-        return net(obs).view(*obs.shape[:-1], self.n_goals, self.n_actions)
+        return forward(net, obs).view(*obs.shape[:-1], self.n_goals, self.n_actions)
 
     def act(self, obs: np.ndarray, goal: int, explore_eps: float, env: gym.Env | None = None) -> int:
         """ε-greedy in Q(obs, goal, ·); ``self.explored`` says whether this action was the random one."""
+        action = self.random_action(explore_eps)
+        return self.greedy(obs, goal) if action is None else action
+
+    def random_action(self, explore_eps: float) -> int | None:
+        """The ε-greedy draw: a random action with probability ``explore_eps``, else None (act greedily)."""
         self.explored = bool(self.rng.random() < explore_eps)
-        if self.explored:
-            return int(self.rng.integers(self.n_actions))
+        return int(self.rng.integers(self.n_actions)) if self.explored else None
+
+    def greedy(self, obs: np.ndarray, goal: int) -> int:
+        """argmax_a Q(obs, goal, a)."""
         with torch.no_grad():
             obs_t = torch.as_tensor(obs, dtype=torch.float32)
             q = self._q(self.q, obs_t)[goal]
         return int(q.argmax())
 
     def observe(self, obs, action, next_obs, before, after, terminated) -> dict[str, float] | None:
+        return self.update() if self.store(obs, action, next_obs, before, after, terminated) else None
+
+    def store(self, obs, action, next_obs, before, after, terminated) -> bool:
+        """Add a transition to the replay; whether a gradient step (:meth:`update`) is due."""
         self.buffer.add(obs=obs, action=action, next_obs=next_obs, before=before, after=after,
                         terminated=terminated)
         self.steps += 1
-        if len(self.buffer) >= self.cfg.learning_starts and self.steps % self.cfg.train_every == 0:
-            return self.update()
-        return None
+        return len(self.buffer) >= self.cfg.learning_starts and self.steps % self.cfg.train_every == 0
 
     def update(self) -> dict[str, float]:
         b = self.buffer.sample(self.cfg.batch_size)

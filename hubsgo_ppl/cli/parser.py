@@ -60,6 +60,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="override the spec's graph preset")
     t.add_argument("--steps", type=int, help="environment-step budget (default: per task family)")
     t.add_argument("--seed", type=_seed, help="seed of every random stream of the run, 0 or more (default 0)")
+    t.add_argument("--seeds", type=_seed, nargs="+", metavar="SEED",
+                   help="train several seeds in one process, in lockstep (their networks updated together); "
+                        "each seed's run goes to OUT/seedK with --out, else to runs/TASK-AGENT-sSEED")
     t.add_argument("--out", help="run directory (default runs/TASK-AGENT-sSEED)")
     t.add_argument("--resume", action="store_true", help="continue the run in --out from its checkpoint")
     t.add_argument("--low-level", choices=["learned", "scripted"], help="low level (default: per family)")

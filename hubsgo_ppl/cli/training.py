@@ -14,6 +14,8 @@ __all__ = ["cmd_train", "cmd_revise"]
 def cmd_train(args: argparse.Namespace) -> int:
     from ..experiments.run import RunConfig, check_resume, train
 
+    if args.seeds is not None:
+        return _train_seeds(args)
     agent, seed = args.agent or "hubsgo", 0 if args.seed is None else args.seed
     out = Path(args.out) if args.out else Path("runs") / f"{args.task}-{agent}-s{seed}"
     if args.resume:     # flags given that would change the run are refused; the run's own values pass
@@ -30,6 +32,32 @@ def cmd_train(args: argparse.Namespace) -> int:
                     restart_schedules=args.restart_schedules, checkpoint_steps=args.checkpoint_steps)
     summary = train(cfg, out, resume=args.resume, progress=not args.no_progress, stop_at=args.stop_at)
     print_summary(summary, out)
+    return 0
+
+
+def _train_seeds(args: argparse.Namespace) -> int:
+    """``hubsgo train TASK --seeds ...``: the seeds in lockstep, each in its own run folder."""
+    from ..experiments.lockstep import seed_folders, train_seeds
+    from ..experiments.run import RunConfig, RunError, check_resume
+
+    agent = args.agent or "hubsgo"
+    if args.seed is not None:
+        raise RunError("give either --seed or --seeds")
+    for flag, given in (("--stop-at", args.stop_at), ("--init-from", args.init_from),
+                        ("--transfer", args.transfer), ("--restart-schedules", args.restart_schedules or None)):
+        if given is not None:
+            raise RunError(f"{flag} applies to one run; train the seeds one by one with --seed")
+    outs = (seed_folders(Path(args.out), args.seeds) if args.out
+            else [Path("runs") / f"{args.task}-{agent}-s{seed}" for seed in args.seeds])
+    if args.resume:
+        for seed, out in zip(args.seeds, outs):
+            check_resume(out, args.task, agent=args.agent, seed=seed, model=args.model, graph=args.graph,
+                         low_level=args.low_level, overrides=args.set or [])
+    cfg = RunConfig(task=args.task, agent=agent, model=args.model, graph=args.graph, steps=args.steps,
+                    low_level=args.low_level, overrides=args.set or [], checkpoint_steps=args.checkpoint_steps)
+    summaries = train_seeds(cfg, args.seeds, outs, resume=args.resume, progress=not args.no_progress)
+    for summary, out in zip(summaries, outs):
+        print_summary(summary, out)
     return 0
 
 

@@ -77,40 +77,77 @@ def _interrupted(out: Path, where: dict[str, Any]) -> str:
 
 
 def _train(cfg: RunConfig, out: Path, resume: bool, callbacks: list[Callback], where: dict[str, Any]) -> dict:
-    run, env, agent, wall0, purge = _start(cfg, out, resume)
-    where["task"] = run.task_ref
     with contextlib.ExitStack() as closing:
+        session = RunSession(cfg, out, resume, callbacks, where, closing)
+        agent = session.agent
+        with session.diverged():
+            while session.wants_chunk():
+                for stats in agent.train_chunk():
+                    session.log(stats)
+                if not session.chunk_end():
+                    break
+        return session.finish()
+
+
+class RunSession:
+    """One run folder being trained: the run built (or restored), its logs open and its callbacks
+    started; :func:`train` plays its chunks one after another, and a lockstep runner
+    (``experiments.lockstep``) plays the episodes of several of them together. ``closing`` closes the
+    env, the logs and the callbacks."""
+
+    def __init__(self, cfg: RunConfig, out: Path, resume: bool, callbacks: list[Callback], where: dict[str, Any],
+                 closing: contextlib.ExitStack):
+        run, env, agent, wall0, purge = _start(cfg, out, resume)
+        where["task"] = run.task_ref
+        self.out, self.run, self.agent, self.where = out, run, agent, where
         closing.callback(env.close)
         torch.set_num_threads(run.threads)
-        logger = Logger([CSVOutput(out / "metrics.csv")])
-        closing.callback(logger.close)
-        logger.outputs.append(TensorBoardOutput(out / "tb", purge_step=purge))
-        state = TrainingRun(out=out, config=run, env=env, agent=agent, logger=logger, wall0=wall0)
-        hooks = CallbackList(callbacks)
-        closing.callback(hooks.on_close, state)
+        self.logger = Logger([CSVOutput(out / "metrics.csv")])
+        closing.callback(self.logger.close)
+        self.logger.outputs.append(TensorBoardOutput(out / "tb", purge_step=purge))
+        self.state = TrainingRun(out=out, config=run, env=env, agent=agent, logger=self.logger, wall0=wall0)
+        self.hooks = CallbackList(callbacks)
+        closing.callback(self.hooks.on_close, self.state)
         where["phase"] = "train"
-        hooks.on_training_start(state)
+        self.hooks.on_training_start(self.state)
+
+    def wants_chunk(self) -> bool:
+        """Whether to play another chunk: budget left and no callback stopping before it."""
+        return self.agent.env_steps < self.run.steps and self.hooks.on_chunk_start(self.state)
+
+    def log(self, stats: Any) -> None:
+        """An episode played: log it and call the episode hooks."""
+        self.state.episodes_this_call += 1
+        _log_episode(self.logger, stats, self.state.wall_time())
+        self.hooks.on_episode(self.state, stats)
+
+    def chunk_end(self) -> bool:
+        """A chunk played: call its hooks (checkpoints); False: stop."""
+        return bool(self.hooks.on_chunk_end(self.state))
+
+    @contextlib.contextmanager
+    def diverged(self):
+        """Non-finite statistics end the run with one line saying what the folder holds."""
         try:
-            while agent.env_steps < run.steps and hooks.on_chunk_start(state):
-                for stats in agent.train_chunk():
-                    state.episodes_this_call += 1
-                    _log_episode(logger, stats, state.wall_time())
-                    hooks.on_episode(state, stats)
-                if not hooks.on_chunk_end(state):
-                    break
+            yield
         except FloatingPointError as exc:
+            out = self.out
             kept = (f"{out / CHECKPOINT} holds the last checkpoint" if (out / CHECKPOINT).exists()
                     else "it diverged before its first checkpoint")
-            raise FloatingPointError(f"{exc} (env step {agent.env_steps:,}): training diverged; {kept}; start a new "
-                                     "run (another --out) with lower learning rates, e.g. --set high.lr=3e-4 "
+            raise FloatingPointError(f"{exc} (env step {self.agent.env_steps:,}): training diverged; {kept}; start a "
+                                     "new run (another --out) with lower learning rates, e.g. --set high.lr=3e-4 "
                                      "--set low.lr=1e-4") from None
-        state.summary.update({"run_dir": str(out), "episodes": agent.episodes, "env_steps": agent.env_steps,
+
+    def finish(self) -> dict[str, Any]:
+        """The run's summary, after the end-of-training hooks (the final checkpoint, G*, the curve)."""
+        state, agent = self.state, self.agent
+        state.summary.update({"run_dir": str(self.out), "episodes": agent.episodes, "env_steps": agent.env_steps,
                               "wall_time": round(state.wall_time(), 2), "finished": state.finished})
-        if run.init_from:
-            state.summary["init_from"] = dict(run.init_from)
-        where["phase"] = "end"
-        hooks.on_training_end(state)
-    return state.summary
+        if self.run.init_from:
+            state.summary["init_from"] = dict(self.run.init_from)
+        self.where["phase"] = "end"
+        self.hooks.on_training_end(state)
+        return state.summary
 
 
 def _start(cfg: RunConfig, out: Path, resume: bool) -> tuple[ResolvedRun, Any, Any, float, int | None]:

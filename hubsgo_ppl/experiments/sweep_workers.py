@@ -1,6 +1,8 @@
-"""Where the runs of a sweep execute: one run per worker (:func:`run_job`), in spawned local processes
-(:func:`local`) or as Ray tasks (:func:`ray_tasks`). A worker never raises: it reports each outcome,
-and the sweep decides about retries."""
+"""Where the runs of a sweep execute: in spawned local processes (:func:`local`) or as Ray tasks
+(:func:`ray_tasks`). The runs of a grid cell (one task and variant, several seeds) go to a worker
+together and train in lockstep in its process (:func:`run_bundle`; ``experiments.lockstep``), split
+so that every worker has a share where there are fewer cells than workers. A worker never raises: it
+reports each run's outcome, and the sweep decides about retries."""
 
 from __future__ import annotations
 
@@ -16,7 +18,7 @@ from ..specs import SpecError
 from .io import CheckpointError
 from .run import CHECKPOINT, RunConfig, RunError
 
-__all__ = ["Job", "run_job", "local", "ray_tasks", "KILL_ENV"]
+__all__ = ["Job", "run_job", "run_bundle", "bundles", "local", "ray_tasks", "KILL_ENV"]
 
 #: test-only: a worker whose run id ("task/variant/seedK") equals this variable SIGKILLs itself right
 #: after its first checkpoint in that process (a deliberately crashed worker for the resume tests)
@@ -38,36 +40,69 @@ class Job:
 
 def run_job(job: Job) -> dict[str, Any]:
     """Train (or resume) one run; never raises: returns ``{"ok": bool, "error": str | None, ...}``."""
+    return run_bundle([job])[0]
+
+
+def run_bundle(jobs: list[Job]) -> list[dict[str, Any]]:
+    """Train (or resume) runs that differ only in their seed, in lockstep in this process; never
+    raises: returns each run's ``{"ok": bool, "error": str | None, ...}`` (an error stops them all)."""
     import torch
 
-    from .run import train
+    from .lockstep import train_seeds
 
     torch.set_num_threads(1)
-    out = Path(job.out)
+    outs = [Path(job.out) for job in jobs]
     # train() resumes from the checkpoint, or starts a folder without one afresh through its own guards:
     # it removes only the files it writes (RUN_FILES) and refuses a folder whose logs outlived a checkpoint
-    resume = (out / CHECKPOINT).is_file()
-    hook = None
-    if os.environ.get(KILL_ENV) == job.run_id:
-        ckpt = out / CHECKPOINT
-        stamp = ckpt.stat().st_mtime_ns if ckpt.exists() else -1
-
-        def hook(stats: Any) -> None:
-            if ckpt.exists() and ckpt.stat().st_mtime_ns != stamp:
-                os.kill(os.getpid(), signal.SIGKILL)
+    resume = [(out / CHECKPOINT).is_file() for out in outs]
+    hooks = [_kill_hook(job) for job in jobs]
     try:
-        summary = train(RunConfig(**job.config), out, resume=resume, progress=False, on_episode=hook)
+        summaries = train_seeds(RunConfig(**jobs[0].config), [job.config["seed"] for job in jobs], outs,
+                                resume=resume, progress=False, on_episode=hooks)
     except (RunError, CheckpointError, SpecError) as exc:   # a refusal: the same again on a retry
-        return {"ok": False, "refused": True, "error": " ".join(str(exc).split())}
+        if len(jobs) > 1:       # the folder refused is one of them: the others train alone
+            return [run_bundle([job])[0] for job in jobs]
+        return [{"ok": False, "refused": True, "error": " ".join(str(exc).split())}]
     except BaseException as exc:  # noqa: BLE001 - reported to the parent, which decides about retries
-        return {"ok": False, "error": f"{type(exc).__name__}: {exc}".strip(), "trace": traceback.format_exc()}
-    ok = bool(summary["finished"])
-    return {"ok": ok, "error": None if ok else "stopped before its budget", "resumed": resume,
-            "env_steps": summary["env_steps"]}
+        return [{"ok": False, "error": f"{type(exc).__name__}: {exc}".strip(), "trace": traceback.format_exc()}
+                for _ in jobs]
+    results = []
+    for summary, again in zip(summaries, resume):
+        ok = bool(summary["finished"])
+        results.append({"ok": ok, "error": None if ok else "stopped before its budget", "resumed": again,
+                        "env_steps": summary["env_steps"]})
+    return results
 
 
-def _child(job: Job, conn: Any) -> None:
-    conn.send(run_job(job))
+def _kill_hook(job: Job) -> Any:
+    if os.environ.get(KILL_ENV) != job.run_id:
+        return None
+    ckpt = Path(job.out) / CHECKPOINT
+    stamp = ckpt.stat().st_mtime_ns if ckpt.exists() else -1
+
+    def hook(stats: Any) -> None:
+        if ckpt.exists() and ckpt.stat().st_mtime_ns != stamp:
+            os.kill(os.getpid(), signal.SIGKILL)
+    return hook
+
+
+def bundles(jobs: list[Job], workers: int) -> list[list[Job]]:
+    """The jobs grouped by grid cell (the same run but for its seed), in order; the largest groups
+    halved while there are fewer groups than ``workers``."""
+    groups: dict[str, list[Job]] = {}
+    for job in jobs:
+        key = repr(({k: v for k, v in job.config.items() if k != "seed"}, job.budget))
+        groups.setdefault(key, []).append(job)
+    out = list(groups.values())
+    while len(out) < workers and max(map(len, out), default=1) > 1:
+        big = max(range(len(out)), key=lambda i: len(out[i]))
+        half = (len(out[big]) + 1) // 2
+        out[big:big + 1] = [out[big][:half], out[big][half:]]
+    return out
+
+
+def _child(jobs: list[Job], conn: Any) -> None:
+    conn.send(run_bundle(jobs))
     conn.close()
 
 
@@ -75,22 +110,23 @@ def _child(job: Job, conn: Any) -> None:
 
 
 def local(jobs: list[Job], workers: int, done: Any) -> None:
-    """Run jobs in up to ``workers`` spawned processes; ``done(job, result)`` gets each outcome."""
+    """Run jobs in up to ``workers`` spawned processes, a bundle (:func:`bundles`) each; ``done(job,
+    result)`` gets each outcome."""
     from multiprocessing.connection import wait
 
     ctx = mp.get_context("spawn")
-    queue = list(jobs)
-    live: dict[Any, tuple[Job, Any, Any]] = {}
+    queue = bundles(jobs, workers)
+    live: dict[Any, tuple[list[Job], Any, Any]] = {}
     while queue or live:
         while queue and len(live) < workers:
-            job = queue.pop(0)
+            group = queue.pop(0)
             recv, send = ctx.Pipe(duplex=False)
-            proc = ctx.Process(target=_child, args=(job, send), name=f"sweep:{job.run_id}", daemon=False)
+            proc = ctx.Process(target=_child, args=(group, send), name=f"sweep:{group[0].run_id}", daemon=False)
             proc.start()
             send.close()
-            live[proc.sentinel] = (job, proc, recv)
+            live[proc.sentinel] = (group, proc, recv)
         for sentinel in wait(list(live)):
-            job, proc, recv = live.pop(sentinel)
+            group, proc, recv = live.pop(sentinel)
             result = None
             try:
                 if recv.poll():
@@ -102,8 +138,9 @@ def local(jobs: list[Job], workers: int, done: Any) -> None:
             if result is None:
                 sig = -proc.exitcode if proc.exitcode and proc.exitcode < 0 else None
                 why = f"killed by signal {signal.Signals(sig).name}" if sig else f"exit code {proc.exitcode}"
-                result = {"ok": False, "error": f"worker died ({why})"}
-            done(job, result)
+                result = [{"ok": False, "error": f"worker died ({why})"} for _ in group]
+            for job, res in zip(group, result):
+                done(job, res)
 
 
 def ray_tasks(jobs: list[Job], workers: int, done: Any) -> None:
@@ -118,16 +155,17 @@ def ray_tasks(jobs: list[Job], workers: int, done: Any) -> None:
                  runtime_env={"env_vars": {"OMP_NUM_THREADS": "1"}})
     try:
         # our own retry policy decides about crashed runs, so Ray must not retry on its own
-        remote = ray.remote(num_cpus=1, max_retries=0)(run_job)
-        pending = {remote.remote(job): job for job in jobs}
+        remote = ray.remote(num_cpus=1, max_retries=0)(run_bundle)
+        pending = {remote.remote(group): group for group in bundles(jobs, workers)}
         while pending:
             ready, _ = ray.wait(list(pending), num_returns=1)
-            job = pending.pop(ready[0])
+            group = pending.pop(ready[0])
             try:
                 result = ray.get(ready[0])
             except Exception as exc:  # a worker that died (e.g. SIGKILL) surfaces here
-                result = {"ok": False, "error": f"worker died ({type(exc).__name__})"}
-            done(job, result)
+                result = [{"ok": False, "error": f"worker died ({type(exc).__name__})"} for _ in group]
+            for job, res in zip(group, result):
+                done(job, res)
     finally:
         if started:
             ray.shutdown()

@@ -78,3 +78,38 @@ def test_target_network_clips_gradients_where_asked_and_round_trips_under_the_le
     other = TargetNetwork(lambda: _linear(torch.Generator().manual_seed(9)), lr=1.0, tau=1.0)
     other.load_state_dict(state, target="q_t")
     assert torch.equal(other.target[0].weight, net.target[0].weight)
+
+
+def _reference_step(net, loss, tau, clip):
+    """The textbook step TargetNetwork.step stands for: torch's Adam, clip_grad_norm_, SB3's polyak_update."""
+    from stable_baselines3.common.utils import polyak_update
+
+    net.opt.zero_grad()
+    loss.backward()
+    if clip is not None:
+        nn.utils.clip_grad_norm_(net.online.parameters(), clip)
+    net.opt.step()
+    polyak_update(net.online.parameters(), net.target.parameters(), tau)
+
+
+@pytest.mark.parametrize("clip", [None, 0.05])
+def test_target_network_step_equals_torchs_adam_clipping_and_polyak_to_the_bit(clip):
+    from hubsgo_ppl.agents.nets import TargetNetwork
+
+    def make(seed):
+        return TargetNetwork(lambda g=torch.Generator().manual_seed(seed): mlp(6, [16, 16], 3, g), 1e-2, 0.05, clip)
+
+    fast, ref = make(3), make(3)
+    x, y = torch.randn(32, 6, generator=torch.Generator().manual_seed(1)), torch.zeros(32, 3)
+    for _ in range(6):
+        fast.step((fast.online(x) - y).pow(2).mean())
+        _reference_step(ref, (ref.online(x) - y).pow(2).mean(), 0.05, clip)
+    for a, b in ((fast.online, ref.online), (fast.target, ref.target)):
+        for (k, va), vb in zip(a.state_dict().items(), b.state_dict().values()):
+            assert torch.equal(va, vb), k
+    sa, sb = fast.opt.state_dict()["state"], ref.opt.state_dict()["state"]
+    assert sa.keys() == sb.keys() and len(sa) == 6
+    for i in sa:
+        for key in ("step", "exp_avg", "exp_avg_sq"):
+            assert torch.equal(sa[i][key], sb[i][key]), (i, key)
+    assert not torch.equal(fast.online[0].weight, make(3).online[0].weight)     # it did learn

@@ -249,3 +249,21 @@ def test_a_sweep_refuses_a_run_folder_whose_logs_outlived_its_checkpoint_as_trai
         "checkpoint.pt is missing, though metrics.csv reaches env step 300" in lines[1], lines
     assert (run / "metrics.csv").read_text() == logs and sorted(p.name for p in run.iterdir()) == \
         ["config.yaml", "metrics.csv"]
+
+
+def test_the_seeds_of_a_grid_cell_train_in_lockstep_in_one_worker_each_as_it_would_alone(tmp_path):
+    from hubsgo_ppl.experiments.sweep_workers import bundles
+
+    path = _write(tmp_path, seeds=[0, 1, 2], tasks=[{"name": "keydoor", "steps": 300}],
+                  variants=[{"name": "hdqn", "agent": "hdqn"}, {"name": "hubsgo", "agent": "hubsgo"}])
+    jobs = plan(load_sweep(path)[0], tmp_path / "p")
+    assert [[j.run_id for j in b] for b in bundles(jobs, 2)] == [
+        [f"keydoor/hdqn/seed{s}" for s in range(3)], [f"keydoor/hubsgo/seed{s}" for s in range(3)]]
+    assert [len(b) for b in bundles(jobs[:3], 2)] == [2, 1]      # one cell, two workers: split in two
+    assert [len(b) for b in bundles(jobs[:1], 2)] == [1]
+    out = tmp_path / "sweep"
+    result = run_sweep(path, workers=1, out=out, progress=False, variants=["hubsgo"])
+    assert result["finished"] == 3 and result["failed"] == []
+    job = {j.run_id: j for j in plan(load_sweep(path)[0], out)}["keydoor/hubsgo/seed2"]
+    train(RunConfig(**job.config), tmp_path / "alone", progress=False)
+    assert _rows(job.out) == _rows(tmp_path / "alone")
