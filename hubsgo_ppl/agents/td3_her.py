@@ -66,6 +66,11 @@ def her_future_relabel(achieved: np.ndarray, k: int, rng: np.random.Generator) -
     return source, achieved[future]
 
 
+def _array(x: Any, dtype: Any = np.float64) -> np.ndarray:
+    """A state entry (a tensor, or a numpy array in older checkpoints) as a numpy array of ``dtype``."""
+    return np.array(x.numpy() if isinstance(x, torch.Tensor) else x, dtype=dtype)
+
+
 class ObsNormaliser:
     """Running mean/std of the observation (HER normalises its inputs): Stable-Baselines3's
     ``RunningMeanStd`` (Chan et al.'s parallel update), in float64, with a floor on the std so that
@@ -99,13 +104,15 @@ class ObsNormaliser:
         return ((x - mean) / std).clamp(-self.clip, self.clip)
 
     def state_dict(self) -> dict[str, Any]:
-        return {"count": self.count, "mean": self.rms.mean.copy(), "var": self.rms.var.copy()}
+        """Tensors and floats only (a checkpoint loads with ``weights_only=True``)."""
+        return {"count": self.count, "mean": torch.from_numpy(self.rms.mean.copy()),
+                "var": torch.from_numpy(self.rms.var.copy())}
 
     def load_state_dict(self, s: dict[str, Any]) -> None:
         count = float(s["count"])
         # checkpoints written before the switch to RunningMeanStd hold the sum of squares ("m2")
-        var = np.array(s["var"]) if "var" in s else np.array(s["m2"]) / max(count, 1.0)
-        self.rms.count, self.rms.mean, self.rms.var = count, np.array(s["mean"], dtype=np.float64), var
+        var = _array(s["var"]) if "var" in s else _array(s["m2"]) / max(count, 1.0)
+        self.rms.count, self.rms.mean, self.rms.var = count, _array(s["mean"]), var
 
 
 class GoalTD3(LowLevelBase):
@@ -312,18 +319,21 @@ class GoalTD3(LowLevelBase):
 
     # ------------------------------------------------------------------ checkpointing
     def state_dict(self) -> dict[str, Any]:
-        """Networks, optimisers, replay, normaliser, pending trajectory and the noise generator's state."""
+        """Networks, optimisers, replay, normaliser, pending trajectory and the noise generator's state.
+
+        The pending trajectory and goal are tensors: an empty numpy array pickles as a call to
+        ``bytes()``, which a weights-only load refuses."""
         return self.td3.state_dict() | {
             "buffer": self.buffer.state_dict(), "norm": self.norm.state_dict(),
-            "traj": {k: np.stack(v) if v else np.zeros((0,)) for k, v in self._traj.items()},
-            "goal": None if self._goal is None else self._goal.copy(),
+            "traj": {k: torch.from_numpy(np.stack(v)) if v else torch.zeros(0) for k, v in self._traj.items()},
+            "goal": None if self._goal is None else torch.from_numpy(self._goal.copy()),
             "gen": self.gen.get_state(), "steps": self.steps, "updates": self.updates}
 
     def load_state_dict(self, s: dict[str, Any]) -> None:
         self.td3.load_state_dict(s)
         self.buffer.load_state_dict(s["buffer"])
         self.norm.load_state_dict(s["norm"])
-        self._traj = {k: [np.array(row) for row in v] if len(v) else [] for k, v in s["traj"].items()}
-        self._goal = None if s["goal"] is None else np.array(s["goal"])
+        self._traj = {k: list(_array(v, np.float32)) if len(v) else [] for k, v in s["traj"].items()}
+        self._goal = None if s["goal"] is None else _array(s["goal"], np.float32)
         self.gen.set_state(s["gen"])
         self.steps, self.td3.updates = int(s["steps"]), int(s["updates"])
