@@ -78,6 +78,9 @@ class PushAnyOne(SubgoalManipulationEnv):
     # small x drift of the y leg does not send the hand back round the cube
     leg_tolerance = (0.025, 0.01)
     push_step = 0.02        # how far ahead of the hand a push target lies (sets the push speed)
+    # a cube that must change rows is first pushed to this gap short of the pads' row, then along it,
+    # so it never rests on (or crosses) a pad other than its target
+    stage_gap = 0.07
 
     def _load_model(self):
         arena = self._load_table()
@@ -131,18 +134,33 @@ class PushAnyOne(SubgoalManipulationEnv):
                                        lambda a, c: self.is_pushed_to(a["object"], a["to"], c), self._push_target)
         return kinds
 
+    def _push_leg(self, cube: np.ndarray, pad: np.ndarray) -> tuple[int, np.ndarray] | None:
+        """The current leg of a push as (axis, the cube's offset to the leg's end), None when done.
+
+        A cube in the pad's row goes straight along x. Otherwise it goes along x to ``stage_gap``
+        short of the pads' row, then along y into the pad's row, then along x onto the pad: it never
+        stops on, or slides across, a pad of another colour (which would count as that pad's push)."""
+        tol_x, tol_y = self.leg_tolerance
+        stage_x = pad[0] - self.stage_gap
+        if abs(pad[1] - cube[1]) > tol_y and cube[0] < stage_x - tol_x:
+            return 0, np.array([stage_x - cube[0], 0.0])
+        if abs(pad[1] - cube[1]) > tol_y:
+            return 1, np.array([0.0, pad[1] - cube[1]])
+        if abs(pad[0] - cube[0]) > tol_x:
+            return 0, np.array([pad[0] - cube[0], 0.0])
+        return None
+
     def _push_target(self, args, contacts):
-        """Push in two axis-aligned legs (x, then y), each on a face normal so the cube slides straight.
+        """Push in axis-aligned legs (:meth:`_push_leg`), each on a face normal so the cube slides straight.
 
         Per leg: get behind the cube on the leg's line (lifting over it when on the wrong side), then
         push with the target at most ``push_step`` ahead of the hand.
         """
         cube = self.object_position(args["object"])
-        offset = self.place_top(args["to"])[:2] - cube[:2]
-        legs = [axis for axis in (0, 1) if abs(offset[axis]) > self.leg_tolerance[axis]]
-        if self.is_pushed_to(args["object"], args["to"], contacts) or not legs:
+        leg = self._push_leg(cube[:2], self.place_top(args["to"])[:2])
+        if self.is_pushed_to(args["object"], args["to"], contacts) or leg is None:
             return self._route(cube + np.array([0.0, 0.0, self.hover_height])), CLOSED
-        axis = legs[0]
+        axis, offset = leg
         u = np.zeros(2)
         u[axis] = np.sign(offset[axis])
         eef = self.eef_position()
