@@ -57,3 +57,20 @@ def test_the_same_seed_gives_the_same_metrics_with_the_learned_low_level(tmp_pat
     first, second = train(tmp_path / "a"), train(tmp_path / "b")
     assert len(first) == 2 and first == second
     assert first[-1]["low/critic_loss"] not in ("", None)
+
+
+@pytest.mark.slow
+def test_a_user_written_arm_task_trains_on_the_family_defaults(tmp_path):
+    """A catalogue the package does not ship (a fourth cube colour and its pad), with its own spec and
+    nothing else: the learned low level, the robosuite family's settings."""
+    from pathlib import Path
+
+    fixtures = Path(__file__).resolve().parents[1] / "fixtures"
+    run = tmp_path / "push_four"
+    assert main(["train", str(fixtures / "push_four.yaml"), "--model", str(fixtures / "push_four-spec.yaml"),
+                 "--low-level", "learned", "--steps", "80", "--seed", "0", "--out", str(run), "--no-progress",
+                 "--set", "env.horizon=40", "--set", "low.learning_starts=32"]) == 0
+    rows = _metrics(run)
+    assert len(rows) == 2 and rows[-1]["low/critic_loss"] not in ("", None)
+    assert "push_yellow_to_yellow" in json.loads((run / "subgoals.json").read_text())["names"]
+    assert main(["evaluate", str(run), "--episodes", "1"]) == 0

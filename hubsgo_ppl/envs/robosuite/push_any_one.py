@@ -7,11 +7,13 @@ from robosuite.models.objects import BoxObject
 from robosuite.models.tasks import ManipulationTask
 from robosuite.utils.placement_samplers import SequentialCompositeSampler, UniformRandomSampler
 
+from ...specs import SpecError
 from .base import CLOSED, SubgoalKind, SubgoalManipulationEnv
 
 __all__ = ["PushAnyOne"]
 
-_RGBA = {"red": (1, 0, 0, 1), "green": (0, 1, 0, 1), "blue": (0, 0, 1, 1)}
+_RGBA = {"red": (1, 0, 0, 1), "green": (0, 1, 0, 1), "blue": (0, 0, 1, 1), "yellow": (1, 1, 0, 1),
+         "magenta": (1, 0, 1, 1), "cyan": (0, 1, 1, 1)}
 
 
 class PushAnyOne(SubgoalManipulationEnv):
@@ -64,11 +66,12 @@ class PushAnyOne(SubgoalManipulationEnv):
     """
 
     colours = ("red", "green", "blue")
+    max_colours = 4         # rows 10 cm apart at most: a cube's 2 cm jitter keeps clear of its neighbours
     # low sliding friction so a push at finger height slides the cube instead of tipping it over
     table_friction = (0.3, 5e-3, 1e-4)
     cube_friction = (0.3, 5e-3, 1e-4)
     cube_half = 0.02
-    slots_y = (-0.15, 0.0, 0.15)
+    slots_y = (-0.15, 0.0, 0.15)    # with other colours: that many rows spread over the same 30 cm
     cube_x_range = (-0.10, -0.06)
     pad_x = 0.12
     push_tolerance = 0.03   # push_to: cube centre within this of the pad centre
@@ -81,6 +84,17 @@ class PushAnyOne(SubgoalManipulationEnv):
     # a cube that must change rows is first pushed to this gap short of the pads' row, then along it,
     # so it never rests on (or crosses) a pad other than its target
     stage_gap = 0.07
+
+    def __init__(self, catalogue, *args, colours: tuple[str, ...] | list[str] = ("red", "green", "blue"), **kwargs):
+        """``colours`` (a catalogue option): the cubes and their pads, one row each."""
+        colours = tuple(colours) if isinstance(colours, (list, tuple)) else (colours,)
+        if not 1 <= len(colours) <= self.max_colours or len(set(colours)) != len(colours) \
+                or not set(colours) <= set(_RGBA):
+            raise SpecError(f"{getattr(catalogue, 'source', 'catalogue')}: options.colours: {list(colours)} is not "
+                            f"1 to {self.max_colours} distinct colours of: {', '.join(_RGBA)}")
+        self.colours = colours
+        self.slots_y = tuple(float(y) for y in np.linspace(-0.15, 0.15, len(colours))) if len(colours) > 1 else (0.0,)
+        super().__init__(catalogue, *args, **kwargs)
 
     def _load_model(self):
         arena = self._load_table()

@@ -63,3 +63,27 @@ def test_a_scripted_push_counts_no_other_pad_on_the_way(arm_env):
         if info["subgoals"][i]:
             break
     assert info["is_success"] and seen == {f"push_{colour}_to_{colour}"}
+
+
+def test_a_catalogue_adds_a_cube_colour_and_its_pad(tmp_path):
+    from pathlib import Path
+
+    from hubsgo_ppl.envs.robosuite import make_robosuite_task
+    from hubsgo_ppl.specs import SpecError
+
+    fixture = Path(__file__).resolve().parents[2] / "fixtures" / "push_four.yaml"
+    env = make_robosuite_task(str(fixture))
+    try:
+        env.reset(seed=1)
+        t = env.unwrapped.task
+        assert t.colours == ("red", "green", "blue", "yellow") and len(t.slots_y) == 4
+        pads_y = sorted(float(t.place_top(f"dest_{c}")[1]) for c in t.colours)
+        np.testing.assert_allclose(pads_y, [-0.15, -0.05, 0.05, 0.15], atol=1e-9)
+        assert env.observation_space.shape == (9 + 4 * 7 + 4 * 3,)
+        assert "push_yellow_to_yellow" in env.unwrapped.subgoal_names
+    finally:
+        env.close()
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(fixture.read_text().replace("[red, green, blue, yellow]", "[red, pink]"))
+    with pytest.raises(SpecError, match=r"bad.yaml: options.colours: \['red', 'pink'\] is not 1 to 4 distinct"):
+        make_robosuite_task(str(bad))
