@@ -50,6 +50,14 @@ class PushAnyOne(SubgoalManipulationEnv):
     y within 2 cm of its slot, no rotation. The pads' colours are a random permutation of the far
     slots (x = 0.12, y = -0.15, 0, 0.15). Pass ``placement_initializer`` to swap the cube sampler.
 
+    A push whose pad lies in another row goes along x to a staging line ``stage_gap`` short of the
+    pads, then along y, then onto the pad, so the cube never rests on or crosses another colour's
+    pad (which would count as a wrong-colour push in the critic's evidence).
+
+    The catalogue option ``colours`` (e.g. ``[red, green, blue, yellow]``, at most four of red,
+    green, blue, yellow, magenta, cyan) sets the cubes and pads, one row each, spread over the same
+    30 cm.
+
     ## Sub-goal catalogue (``envs/push_any_one.yaml``)
 
     | name | kind | achieved when |
