@@ -254,7 +254,7 @@ class GoalTD3Config(Settings):
     batch_size: Count = 128
     buffer_size: Count = 200_000
     learning_starts: Starts = 500    # stored transitions (relabelled included) before updates start
-    train_every: Count = 1           # env steps per gradient step
+    train_every: Count = 2           # env steps per gradient step (benchmarks/arm_loop.py: its cost)
     gradient_steps: Count = 1        # gradient steps each time training triggers
     policy_delay: Count = 2          # TD3: one actor update per this many critic updates
     target_noise: NonNegative = 0.2  # TD3 target policy smoothing (fraction of the action range)
@@ -263,7 +263,8 @@ class GoalTD3Config(Settings):
     random_eps: Share = 0.3          # uniform random action with probability random_eps * explore_eps
     action_l2: NonNegative = 0.1     # HER's penalty on the actor's (normalised) actions
     her_k: Starts = 4                # relabelled copies per transition ('future' strategy)
-    tolerance: Rate = 0.02           # metres: the target region's radius
+    tolerance: Rate = 0.01           # metres: the target region's radius, inside the arm interface's 1.5 cm
+    #                                  grip trigger (a hand 2 cm off never closes on its object)
     gripper_tolerance: Rate = 0.5    # |applied - commanded| gripper within this counts as reached
     goal_scale: Rate = 10.0          # relative goal (m) times this is the network input
     use_obs: Flag = False            # also feed the (normalised) observation, not only the goal

@@ -4,7 +4,8 @@ One of the two low levels of the arm tasks (the other is the scripted
 :class:`~hubsgo_ppl.agents.scripted_osc.ScriptedOSC`). The high level picks a sub-goal g; the task
 turns it into a target region ``env.unwrapped.subgoal_target(g) = (xyz, gripper)`` (a waypoint
 re-evaluated on every step, so routing — lift, cross, descend — stays in the task). This policy learns
-to bring the end effector there and to drive the gripper to the commanded value. Its goal input is the
+to bring the end effector there; the target's gripper command is applied as given (the networks act on
+the motion entries of the action only, so exploration never drops a carried object). Its goal input is the
 target *relative to the end effector* (plus the gripper command), so one policy serves every sub-goal
 of every task.
 
@@ -158,7 +159,9 @@ class GoalTD3(LowLevelBase):
         in_dim = (obs_dim if config.use_obs else 0) + self.goal_dim
         # actions in [-1, 1] (mapped to the env's bounds by _scale); HER's returns of -1 per step lie
         # in [-1/(1-γ), 0] (no terminal on reaching), so the TD target is clipped there
-        self.td3 = TD3Core(in_dim, self.act_dim, config.hidden, generator, actor_lr=config.actor_lr,
+        # the networks act on the motion only; the gripper entry of an action is the target's command
+        self.motion = np.array([i for i in range(self.act_dim) if i != gripper_index])
+        self.td3 = TD3Core(in_dim, self.motion.size, config.hidden, generator, actor_lr=config.actor_lr,
                            critic_lr=config.critic_lr, tau=config.tau, policy_delay=config.policy_delay,
                            target_noise=config.target_noise, target_noise_clip=config.target_noise_clip,
                            action_l2=config.action_l2, target_range=(-1.0 / (1.0 - config.gamma), 0.0),
@@ -207,13 +210,14 @@ class GoalTD3(LowLevelBase):
         return torch.cat(parts, dim=-1)
 
     def _scale(self, a: torch.Tensor) -> torch.Tensor:
-        """[-1, 1] (tanh) -> the env's bounds."""
-        low, high = torch.as_tensor(self.low), torch.as_tensor(self.high)
+        """The actor's motion in [-1, 1] (tanh) -> the env's bounds of those action entries."""
+        low, high = torch.as_tensor(self.low[self.motion]), torch.as_tensor(self.high[self.motion])
         return low + (a + 1.0) * 0.5 * (high - low)
 
     def _unscale(self, a: torch.Tensor) -> torch.Tensor:
-        low, high = torch.as_tensor(self.low), torch.as_tensor(self.high)
-        return 2.0 * (a - low) / (high - low) - 1.0
+        """A stored action's motion entries -> [-1, 1]."""
+        low, high = torch.as_tensor(self.low[self.motion]), torch.as_tensor(self.high[self.motion])
+        return 2.0 * (a[..., self.motion] - low) / (high - low) - 1.0
 
     # ------------------------------------------------------------------ acting
     def goal_of(self, env: gym.Env, goal_index: int) -> np.ndarray:
@@ -229,22 +233,33 @@ class GoalTD3(LowLevelBase):
         """Deterministic action of the actor for ``goal`` (position, [gripper])."""
         with torch.no_grad():
             x = self._inputs(torch.as_tensor(obs, dtype=torch.float32), torch.as_tensor(goal, dtype=torch.float32))
-            return self._scale(self.td3.mu(x)).numpy()
+            action = np.zeros(self.act_dim, dtype=np.float32)
+            action[self.motion] = self._scale(self.td3.mu(x)).numpy()
+            return self._command_gripper(action, goal)
+
+    def _command_gripper(self, action: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        """The target's gripper command, applied as given: the networks learn the motion only, and
+        exploration never opens a hand that carries an object (a random gripper value drops it)."""
+        if self.grip is not None:
+            action = np.array(action, dtype=np.float32)
+            action[self.grip] = np.clip(goal[self.pos_dim], self.low[self.grip], self.high[self.grip])
+        return action
 
     def act(self, obs: np.ndarray, goal_index: int, explore_eps: float, env: gym.Env) -> np.ndarray:
         """Action towards sub-goal ``goal_index``: Gaussian noise of std ``explore_eps * noise_sigma``
-        (fraction of the range) and, with probability ``explore_eps * random_eps``, a uniform action.
+        (fraction of the range) and, with probability ``explore_eps * random_eps``, a uniform action;
+        the gripper command is the target's either way.
         ``explore_eps = 0`` (greedy evaluation) is deterministic."""
         if not 0.0 <= explore_eps <= 1.0:
             raise ValueError(f"explore_eps must be in [0, 1], got {explore_eps}")
         goal = self.goal_of(env, goal_index)
         self._goal = goal
         if explore_eps > 0 and self.rng.random() < explore_eps * self.cfg.random_eps:
-            return self.rng.uniform(self.low, self.high).astype(np.float32)
+            return self._command_gripper(self.rng.uniform(self.low, self.high).astype(np.float32), goal)
         a = self.policy(obs, goal)
         if explore_eps > 0 and self.cfg.noise_sigma > 0:
             a = a + self.rng.normal(0.0, explore_eps * self.cfg.noise_sigma, self.act_dim) * (self.high - self.low) / 2
-        return np.clip(a, self.low, self.high).astype(np.float32)
+        return self._command_gripper(np.clip(a, self.low, self.high).astype(np.float32), goal)
 
     # ------------------------------------------------------------------ storing
     def achieved(self, action: np.ndarray, next_obs: np.ndarray) -> np.ndarray:
