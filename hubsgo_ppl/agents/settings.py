@@ -254,7 +254,7 @@ class GoalTD3Config(Settings):
     batch_size: Count = 128
     buffer_size: Count = 200_000
     learning_starts: Starts = 500    # stored transitions (relabelled included) before updates start
-    train_every: Count = 2           # env steps per gradient step (benchmarks/arm_loop.py: its cost)
+    train_every: Count = 1           # env steps per gradient step (2: held-out reach 0.40 against 1.00 at 3,000 steps)
     gradient_steps: Count = 1        # gradient steps each time training triggers
     policy_delay: Count = 2          # TD3: one actor update per this many critic updates
     target_noise: NonNegative = 0.2  # TD3 target policy smoothing (fraction of the action range)

@@ -183,7 +183,7 @@ def test_state_dict_round_trip_continues_identically():
 # ---------------------------------------------------------------- learning
 def test_learns_to_reach_point_mass_targets():
     env = PointMass()
-    agent = make_agent(seed=0, train_every=1)
+    agent = make_agent(seed=0)
     before = np.mean([run_episode(agent, env, 10_000 + i, 25, 0.0, train=False) for i in range(40)])
     for ep in range(64):                       # 1,600 env steps (1,400 TD3 updates)
         run_episode(agent, env, ep, 25, 0.5)

@@ -85,7 +85,7 @@ class PushAnyOne(SubgoalManipulationEnv):
     push_tolerance = 0.03   # push_to: cube centre within this of the pad centre
     push_height = 0.018     # hand height above the table while pushing (fingertips clear the table)
     standoff = 0.04         # hand-to-cube-centre distance behind the cube before a push
-    # a push leg (x, then y) is done within this of the pad centre; the x leg is looser so the
+    # a push leg (along x or y) is done within this of its end; the x leg is looser so the
     # small x drift of the y leg does not send the hand back round the cube
     leg_tolerance = (0.025, 0.01)
     push_step = 0.02        # how far ahead of the hand a push target lies (sets the push speed)
