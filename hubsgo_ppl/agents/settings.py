@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import functools
 import inspect
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, Optional
 
 from pydantic import (BaseModel, BeforeValidator, ConfigDict, Field, StrictBool, StrictFloat, StrictInt,
                       ValidationError, create_model)
@@ -269,6 +269,9 @@ class GoalTD3Config(Settings):
     goal_scale: Rate = 10.0          # relative goal (m) times this is the network input
     use_obs: Flag = False            # also feed the (normalised) observation, not only the goal
     obs_clip: Rate = 5.0
+    # the task-agnostic reach skill the networks start from (hubsgo_ppl/agents/reach_skill.pt, trained by
+    # benchmarks/reach_skill.py --save); null: from scratch
+    skill: Optional[Literal["reach"]] = "reach"
 
 
 class ScriptedMazeConfig(Settings):

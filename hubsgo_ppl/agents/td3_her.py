@@ -198,8 +198,37 @@ class GoalTD3(LowLevelBase):
         if not keys or keys[0] != "robot0_eef_pos":
             raise ValueError("GoalTD3.for_env expects the flat observation to start with robot0_eef_pos "
                              f"(the achieved position); this env's keys are {keys or 'unknown'}")
-        return cls(int(np.prod(env.observation_space.shape)), env.action_space.low, env.action_space.high,
-                   (0, 3), env.action_space.shape[0] - 1, config, gen, rng)
+        agent = cls(int(np.prod(env.observation_space.shape)), env.action_space.low, env.action_space.high,
+                    (0, 3), env.action_space.shape[0] - 1, config, gen, rng)
+        if config.skill is not None:
+            agent.load_skill(config.skill)
+        return agent
+
+    # ------------------------------------------------------------------ the shipped reach skill
+    #: the reach skill's networks: input (relative goal xyz, gripper command), output the motion
+    SKILL_SHAPE = {"in_dim": 4, "motion": 3}
+
+    def save_skill(self, path: str, meta: dict[str, Any]) -> None:
+        """Write the actor and critics (tensors only) and ``meta`` (plain data) as a skill file."""
+        torch.save({"actor": self.td3.actor.state_dict(), "critics": self.td3.critics.state_dict(),
+                    "hidden": list(self.cfg.hidden), "meta": meta}, path)
+
+    def load_skill(self, name: str) -> None:
+        """Start the actor, the critics and their targets from the shipped skill ``name``."""
+        from importlib import resources
+
+        path = resources.files("hubsgo_ppl.agents") / f"{name}_skill.pt"
+        with resources.as_file(path) as file:
+            state = torch.load(file, map_location="cpu", weights_only=True)
+        shape = {"in_dim": self.goal_dim + (self.obs_dim if self.cfg.use_obs else 0), "motion": int(self.motion.size)}
+        if shape != self.SKILL_SHAPE or list(self.cfg.hidden) != list(state["hidden"]):
+            raise ValueError(f"low.skill={name}: the skill's networks (hidden {state['hidden']}, goal-only input) do not "
+                             f"fit this low level (hidden {list(self.cfg.hidden)}, use_obs {self.cfg.use_obs}); "
+                             "set low.skill=null to learn from scratch")
+        for net, target, key in ((self.td3.actor, self.td3.actor_target, "actor"),
+                                 (self.td3.critics, self.td3.critics_target, "critics")):
+            net.load_state_dict(state[key])
+            target.load_state_dict(state[key])
 
     # ------------------------------------------------------------------ networks
     def _inputs(self, obs: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:

@@ -46,7 +46,7 @@ def test_an_arm_run_resolves_to_the_typed_robosuite_defaults_with_the_tasks_own(
     hyper = resolve_hyper("robosuite", "stack_cubes", "hubsgo")
     built = {s: make_config(s, cls, hyper[s], **({"total_steps": hyper["steps"]} if s == "loop" else {}))
              for s, cls in section_classes("hubsgo", "robosuite", hyper["low_level"]).items()}
-    assert _dump(built["loop"]) == _dump(LoopConfig.robosuite()) | {"option_steps": 40, "total_steps": 20_000}
+    assert _dump(built["loop"]) == _dump(LoopConfig.robosuite()) | {"total_steps": 20_000}
     assert _dump(built["high"]) == _dump(HighLevelConfig.robosuite())
     assert _dump(built["low"]) == _dump(ScriptedOSCConfig())
     hiro = resolve_hyper("robosuite", "push_any_one", "hiro")
