@@ -48,12 +48,18 @@ def _play(agent, steps: int) -> None:
         done += sum(e.length for e in agent.train_chunk())
 
 
-MAZE_AGENTS = [("hubsgo", "learned"), ("hubsgo", "scripted"), ("hdqn", "learned"), ("ddqn", None), ("ppo", None)]
+MAZE_AGENTS = [("hubsgo", "learned"), ("hubsgo", "scripted"), ("hdqn", "learned"),
+               pytest.param("ddqn", None, marks=pytest.mark.slow), pytest.param("ppo", None, marks=pytest.mark.slow)]
+# small replay buffers and rollouts: the states are the same kinds of data, a few MB rather than hundreds
+SMALL = {"hubsgo": ["low.buffer_size=500", "high.buffer_size=500"], "hdqn": ["low.buffer_size=500", "high.buffer_size=500"],
+         "ddqn": ["dqn.buffer_size=500", "dqn.learning_starts=20"], "ppo": ["ppo.n_steps=32", "ppo.batch_size=16"]}
 
 
 @pytest.mark.parametrize("agent_name,low", MAZE_AGENTS)
 def test_a_maze_agent_checkpoint_loads_safely(agent_name, low, tmp_path):
-    run = resolve_run(RunConfig(task="keydoor", agent=agent_name, steps=2000, seed=0, low_level=low))
+    overrides = ["env.max_steps=40", *(SMALL[agent_name] if low != "scripted" else ["high.buffer_size=500"])]
+    run = resolve_run(RunConfig(task="keydoor", agent=agent_name, steps=2000, seed=0, low_level=low,
+                                overrides=overrides))
     env, agent = build_run(run)
     try:
         _round_trip(tmp_path, run, agent)
