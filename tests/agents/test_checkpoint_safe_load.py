@@ -48,8 +48,7 @@ def _play(agent, steps: int) -> None:
         done += sum(e.length for e in agent.train_chunk())
 
 
-MAZE_AGENTS = [("hubsgo", "learned"), ("hubsgo", "scripted"), ("hdqn", "learned"),
-               pytest.param("ddqn", None, marks=pytest.mark.slow), pytest.param("ppo", None, marks=pytest.mark.slow)]
+MAZE_AGENTS = [("hubsgo", "learned"), ("hubsgo", "scripted"), ("hdqn", "learned"), ("ddqn", None), ("ppo", None)]
 # small replay buffers and rollouts: the states are the same kinds of data, a few MB rather than hundreds
 SMALL = {"hubsgo": ["low.buffer_size=500", "high.buffer_size=500"], "hdqn": ["low.buffer_size=500", "high.buffer_size=500"],
          "ddqn": ["dqn.buffer_size=500", "dqn.learning_starts=20"], "ppo": ["ppo.n_steps=32", "ppo.batch_size=16"]}
