@@ -10,6 +10,10 @@ it with the gripper command applied. Training uses GoalTD3 exactly as the HRL lo
 
     .venv/bin/python benchmarks/reach_skill.py --task stack_cubes --budget 6000 --seed 0
 
+The learned arm low level starts from the skill this trains (``GoalTD3Config.skill``), made with
+
+    .venv/bin/python benchmarks/reach_skill.py --budget 6000 --target 1.0 --save hubsgo_ppl/agents/reach_skill.pt
+
 Prints one JSON line per evaluation and a final JSON summary (budget, steps used, success, wall time).
 """
 
@@ -80,12 +84,14 @@ def main(argv=None) -> dict:
     p.add_argument("--explore", type=float, default=0.5, help="explore_eps while training")
     p.add_argument("--set", nargs="*", default=[], help="GoalTD3Config overrides, e.g. use_obs=false")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--save", default=None, help="write the trained networks here (the shipped skill: "
+                   "hubsgo_ppl/agents/reach_skill.pt)")
     args = p.parse_args(argv)
     torch.set_num_threads(1)
 
     import yaml
 
-    low_cfg = {"hidden": [128, 128], "batch_size": 128, "learning_starts": 500, "use_obs": False}
+    low_cfg = {"hidden": [128, 128], "batch_size": 128, "learning_starts": 500, "use_obs": False, "skill": None}
     for item in args.set:
         k, v = item.split("=", 1)
         low_cfg[k] = yaml.safe_load(v)
@@ -120,6 +126,8 @@ def main(argv=None) -> dict:
                "wall_s": round(time.perf_counter() - t0, 1), "low_cfg": low_cfg, "seed": args.seed,
                "python": platform.python_version(), "torch": str(torch.__version__)}
     print(json.dumps(summary))
+    if args.save:
+        agent.save_skill(args.save, summary)
     env.close()
     return summary
 

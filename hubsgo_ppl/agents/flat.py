@@ -281,7 +281,8 @@ class SB3Trainer:
             rb = m.replay_buffer
             n = rb.buffer_size if rb.full else rb.pos
             s["replay"] = {"pos": int(rb.pos), "full": bool(rb.full),
-                           **{k: getattr(rb, k)[:n].copy() for k in _REPLAY_FIELDS if getattr(rb, k) is not None}}
+                           **{k: torch.from_numpy(getattr(rb, k)[:n].copy()) for k in _REPLAY_FIELDS
+                              if getattr(rb, k) is not None}}    # tensors: an empty array pickles as bytes()
         return s
 
     def load_state_dict(self, s: dict[str, Any]) -> None:
@@ -303,9 +304,10 @@ class SB3Trainer:
             for k in _REPLAY_FIELDS:
                 if k in rep:
                     arr = getattr(rb, k)
-                    if arr[: len(rep[k])].shape != rep[k].shape:
-                        raise ValueError(f"replay field {k!r} has shape {rep[k].shape}, expected {arr.shape}")
-                    arr[: len(rep[k])] = rep[k]
+                    stored = np.asarray(rep[k])
+                    if arr[: len(stored)].shape != stored.shape:
+                        raise ValueError(f"replay field {k!r} has shape {stored.shape}, expected {arr.shape}")
+                    arr[: len(stored)] = stored
             rb.pos, rb.full = int(rep["pos"]), bool(rep["full"])
         dtype = self.wrapper.action_space.dtype
         self.wrapper.actions = [np.asarray(a, dtype=dtype) for a in s["wrapper"]["actions"]]

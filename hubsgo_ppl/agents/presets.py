@@ -74,7 +74,7 @@ PRESETS: dict[str, dict[str, Any]] = {name: family.as_dict() for name, family in
 # Per-task settings merged over the family's: the arm tasks' horizons and budgets (docs/results.md).
 # Mazes have none: every maze trains on the MiniGrid family default.
 TASK_PRESETS: dict[str, dict[str, Any]] = {
-    "stack_cubes": {"steps": 20_000, "env": {"horizon": 400}, "loop": {"option_steps": 40}},
+    "stack_cubes": {"steps": 20_000, "env": {"horizon": 400}},
     "push_any_one": {"steps": 8_000, "env": {"horizon": 200}},
     "collect_three_balls": {"steps": 12_000, "env": {"horizon": 600}},
 }

@@ -4,7 +4,8 @@ One of the two low levels of the arm tasks (the other is the scripted
 :class:`~hubsgo_ppl.agents.scripted_osc.ScriptedOSC`). The high level picks a sub-goal g; the task
 turns it into a target region ``env.unwrapped.subgoal_target(g) = (xyz, gripper)`` (a waypoint
 re-evaluated on every step, so routing — lift, cross, descend — stays in the task). This policy learns
-to bring the end effector there and to drive the gripper to the commanded value. Its goal input is the
+to bring the end effector there; the target's gripper command is applied as given (the networks act on
+the motion entries of the action only, so exploration never drops a carried object). Its goal input is the
 target *relative to the end effector* (plus the gripper command), so one policy serves every sub-goal
 of every task.
 
@@ -66,6 +67,11 @@ def her_future_relabel(achieved: np.ndarray, k: int, rng: np.random.Generator) -
     return source, achieved[future]
 
 
+def _array(x: Any, dtype: Any = np.float64) -> np.ndarray:
+    """A state entry (a tensor, or a numpy array in older checkpoints) as a numpy array of ``dtype``."""
+    return np.array(x.numpy() if isinstance(x, torch.Tensor) else x, dtype=dtype)
+
+
 class ObsNormaliser:
     """Running mean/std of the observation (HER normalises its inputs): Stable-Baselines3's
     ``RunningMeanStd`` (Chan et al.'s parallel update), in float64, with a floor on the std so that
@@ -99,13 +105,15 @@ class ObsNormaliser:
         return ((x - mean) / std).clamp(-self.clip, self.clip)
 
     def state_dict(self) -> dict[str, Any]:
-        return {"count": self.count, "mean": self.rms.mean.copy(), "var": self.rms.var.copy()}
+        """Tensors and floats only (a checkpoint loads with ``weights_only=True``)."""
+        return {"count": self.count, "mean": torch.from_numpy(self.rms.mean.copy()),
+                "var": torch.from_numpy(self.rms.var.copy())}
 
     def load_state_dict(self, s: dict[str, Any]) -> None:
         count = float(s["count"])
         # checkpoints written before the switch to RunningMeanStd hold the sum of squares ("m2")
-        var = np.array(s["var"]) if "var" in s else np.array(s["m2"]) / max(count, 1.0)
-        self.rms.count, self.rms.mean, self.rms.var = count, np.array(s["mean"], dtype=np.float64), var
+        var = _array(s["var"]) if "var" in s else _array(s["m2"]) / max(count, 1.0)
+        self.rms.count, self.rms.mean, self.rms.var = count, _array(s["mean"]), var
 
 
 class GoalTD3(LowLevelBase):
@@ -151,7 +159,9 @@ class GoalTD3(LowLevelBase):
         in_dim = (obs_dim if config.use_obs else 0) + self.goal_dim
         # actions in [-1, 1] (mapped to the env's bounds by _scale); HER's returns of -1 per step lie
         # in [-1/(1-γ), 0] (no terminal on reaching), so the TD target is clipped there
-        self.td3 = TD3Core(in_dim, self.act_dim, config.hidden, generator, actor_lr=config.actor_lr,
+        # the networks act on the motion only; the gripper entry of an action is the target's command
+        self.motion = np.array([i for i in range(self.act_dim) if i != gripper_index])
+        self.td3 = TD3Core(in_dim, self.motion.size, config.hidden, generator, actor_lr=config.actor_lr,
                            critic_lr=config.critic_lr, tau=config.tau, policy_delay=config.policy_delay,
                            target_noise=config.target_noise, target_noise_clip=config.target_noise_clip,
                            action_l2=config.action_l2, target_range=(-1.0 / (1.0 - config.gamma), 0.0),
@@ -188,8 +198,37 @@ class GoalTD3(LowLevelBase):
         if not keys or keys[0] != "robot0_eef_pos":
             raise ValueError("GoalTD3.for_env expects the flat observation to start with robot0_eef_pos "
                              f"(the achieved position); this env's keys are {keys or 'unknown'}")
-        return cls(int(np.prod(env.observation_space.shape)), env.action_space.low, env.action_space.high,
-                   (0, 3), env.action_space.shape[0] - 1, config, gen, rng)
+        agent = cls(int(np.prod(env.observation_space.shape)), env.action_space.low, env.action_space.high,
+                    (0, 3), env.action_space.shape[0] - 1, config, gen, rng)
+        if config.skill is not None:
+            agent.load_skill(config.skill)
+        return agent
+
+    # ------------------------------------------------------------------ the shipped reach skill
+    #: the reach skill's networks: input (relative goal xyz, gripper command), output the motion
+    SKILL_SHAPE = {"in_dim": 4, "motion": 3}
+
+    def save_skill(self, path: str, meta: dict[str, Any]) -> None:
+        """Write the actor and critics (tensors only) and ``meta`` (plain data) as a skill file."""
+        torch.save({"actor": self.td3.actor.state_dict(), "critics": self.td3.critics.state_dict(),
+                    "hidden": list(self.cfg.hidden), "meta": meta}, path)
+
+    def load_skill(self, name: str) -> None:
+        """Start the actor, the critics and their targets from the shipped skill ``name``."""
+        from importlib import resources
+
+        path = resources.files("hubsgo_ppl.agents") / f"{name}_skill.pt"
+        with resources.as_file(path) as file:
+            state = torch.load(file, map_location="cpu", weights_only=True)
+        shape = {"in_dim": self.goal_dim + (self.obs_dim if self.cfg.use_obs else 0), "motion": int(self.motion.size)}
+        if shape != self.SKILL_SHAPE or list(self.cfg.hidden) != list(state["hidden"]):
+            raise ValueError(f"low.skill={name}: the skill's networks (hidden {state['hidden']}, goal-only input) do not "
+                             f"fit this low level (hidden {list(self.cfg.hidden)}, use_obs {self.cfg.use_obs}); "
+                             "set low.skill=null to learn from scratch")
+        for net, target, key in ((self.td3.actor, self.td3.actor_target, "actor"),
+                                 (self.td3.critics, self.td3.critics_target, "critics")):
+            net.load_state_dict(state[key])
+            target.load_state_dict(state[key])
 
     # ------------------------------------------------------------------ networks
     def _inputs(self, obs: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
@@ -200,13 +239,14 @@ class GoalTD3(LowLevelBase):
         return torch.cat(parts, dim=-1)
 
     def _scale(self, a: torch.Tensor) -> torch.Tensor:
-        """[-1, 1] (tanh) -> the env's bounds."""
-        low, high = torch.as_tensor(self.low), torch.as_tensor(self.high)
+        """The actor's motion in [-1, 1] (tanh) -> the env's bounds of those action entries."""
+        low, high = torch.as_tensor(self.low[self.motion]), torch.as_tensor(self.high[self.motion])
         return low + (a + 1.0) * 0.5 * (high - low)
 
     def _unscale(self, a: torch.Tensor) -> torch.Tensor:
-        low, high = torch.as_tensor(self.low), torch.as_tensor(self.high)
-        return 2.0 * (a - low) / (high - low) - 1.0
+        """A stored action's motion entries -> [-1, 1]."""
+        low, high = torch.as_tensor(self.low[self.motion]), torch.as_tensor(self.high[self.motion])
+        return 2.0 * (a[..., self.motion] - low) / (high - low) - 1.0
 
     # ------------------------------------------------------------------ acting
     def goal_of(self, env: gym.Env, goal_index: int) -> np.ndarray:
@@ -222,22 +262,33 @@ class GoalTD3(LowLevelBase):
         """Deterministic action of the actor for ``goal`` (position, [gripper])."""
         with torch.no_grad():
             x = self._inputs(torch.as_tensor(obs, dtype=torch.float32), torch.as_tensor(goal, dtype=torch.float32))
-            return self._scale(self.td3.mu(x)).numpy()
+            action = np.zeros(self.act_dim, dtype=np.float32)
+            action[self.motion] = self._scale(self.td3.mu(x)).numpy()
+            return self._command_gripper(action, goal)
+
+    def _command_gripper(self, action: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        """The target's gripper command, applied as given: the networks learn the motion only, and
+        exploration never opens a hand that carries an object (a random gripper value drops it)."""
+        if self.grip is not None:
+            action = np.array(action, dtype=np.float32)
+            action[self.grip] = np.clip(goal[self.pos_dim], self.low[self.grip], self.high[self.grip])
+        return action
 
     def act(self, obs: np.ndarray, goal_index: int, explore_eps: float, env: gym.Env) -> np.ndarray:
         """Action towards sub-goal ``goal_index``: Gaussian noise of std ``explore_eps * noise_sigma``
-        (fraction of the range) and, with probability ``explore_eps * random_eps``, a uniform action.
+        (fraction of the range) and, with probability ``explore_eps * random_eps``, a uniform action;
+        the gripper command is the target's either way.
         ``explore_eps = 0`` (greedy evaluation) is deterministic."""
         if not 0.0 <= explore_eps <= 1.0:
             raise ValueError(f"explore_eps must be in [0, 1], got {explore_eps}")
         goal = self.goal_of(env, goal_index)
         self._goal = goal
         if explore_eps > 0 and self.rng.random() < explore_eps * self.cfg.random_eps:
-            return self.rng.uniform(self.low, self.high).astype(np.float32)
+            return self._command_gripper(self.rng.uniform(self.low, self.high).astype(np.float32), goal)
         a = self.policy(obs, goal)
         if explore_eps > 0 and self.cfg.noise_sigma > 0:
             a = a + self.rng.normal(0.0, explore_eps * self.cfg.noise_sigma, self.act_dim) * (self.high - self.low) / 2
-        return np.clip(a, self.low, self.high).astype(np.float32)
+        return self._command_gripper(np.clip(a, self.low, self.high).astype(np.float32), goal)
 
     # ------------------------------------------------------------------ storing
     def achieved(self, action: np.ndarray, next_obs: np.ndarray) -> np.ndarray:
@@ -312,18 +363,21 @@ class GoalTD3(LowLevelBase):
 
     # ------------------------------------------------------------------ checkpointing
     def state_dict(self) -> dict[str, Any]:
-        """Networks, optimisers, replay, normaliser, pending trajectory and the noise generator's state."""
+        """Networks, optimisers, replay, normaliser, pending trajectory and the noise generator's state.
+
+        The pending trajectory and goal are tensors: an empty numpy array pickles as a call to
+        ``bytes()``, which a weights-only load refuses."""
         return self.td3.state_dict() | {
             "buffer": self.buffer.state_dict(), "norm": self.norm.state_dict(),
-            "traj": {k: np.stack(v) if v else np.zeros((0,)) for k, v in self._traj.items()},
-            "goal": None if self._goal is None else self._goal.copy(),
+            "traj": {k: torch.from_numpy(np.stack(v)) if v else torch.zeros(0) for k, v in self._traj.items()},
+            "goal": None if self._goal is None else torch.from_numpy(self._goal.copy()),
             "gen": self.gen.get_state(), "steps": self.steps, "updates": self.updates}
 
     def load_state_dict(self, s: dict[str, Any]) -> None:
         self.td3.load_state_dict(s)
         self.buffer.load_state_dict(s["buffer"])
         self.norm.load_state_dict(s["norm"])
-        self._traj = {k: [np.array(row) for row in v] if len(v) else [] for k, v in s["traj"].items()}
-        self._goal = None if s["goal"] is None else np.array(s["goal"])
+        self._traj = {k: list(_array(v, np.float32)) if len(v) else [] for k, v in s["traj"].items()}
+        self._goal = None if s["goal"] is None else _array(s["goal"], np.float32)
         self.gen.set_state(s["gen"])
         self.steps, self.td3.updates = int(s["steps"]), int(s["updates"])

@@ -46,7 +46,7 @@ def test_an_arm_run_resolves_to_the_typed_robosuite_defaults_with_the_tasks_own(
     hyper = resolve_hyper("robosuite", "stack_cubes", "hubsgo")
     built = {s: make_config(s, cls, hyper[s], **({"total_steps": hyper["steps"]} if s == "loop" else {}))
              for s, cls in section_classes("hubsgo", "robosuite", hyper["low_level"]).items()}
-    assert _dump(built["loop"]) == _dump(LoopConfig.robosuite()) | {"option_steps": 40, "total_steps": 20_000}
+    assert _dump(built["loop"]) == _dump(LoopConfig.robosuite()) | {"total_steps": 20_000}
     assert _dump(built["high"]) == _dump(HighLevelConfig.robosuite())
     assert _dump(built["low"]) == _dump(ScriptedOSCConfig())
     hiro = resolve_hyper("robosuite", "push_any_one", "hiro")
@@ -146,7 +146,8 @@ def test_make_config_validates_keys_and_kinds_in_one_line():
 
 def test_resolve_merges_preset_task_and_overrides():
     hyper = resolve_hyper("robosuite", "stack_cubes", "hubsgo", ["loop.gamma=1", "high.lr=3e-4"], steps=100)
-    assert hyper["steps"] == 100 and hyper["loop"]["option_steps"] == 40          # the task's own setting
+    assert hyper["steps"] == 100 and hyper["env"]["horizon"] == 400            # the task's own setting
+    assert hyper["loop"]["option_steps"] == 60                                     # the family's
     assert hyper["loop"]["gamma"] == 1.0 and hyper["high"]["lr"] == 3e-4
     assert set(section_classes("hubsgo", "robosuite", "scripted")) == {"loop", "high", "low"}
     # flat baselines: SB3's argument names, numbers written as text made numbers, the trainer's settings

@@ -78,7 +78,7 @@ def test_hdqn_scripted_smoke_run_and_greedy_evaluation(tmp_path, record_episodes
 
 def test_learned_low_level_trains_in_the_loop_and_resumes(tmp_path):
     out = tmp_path / "learned"
-    low = ["low.hidden=[32, 32]", "low.batch_size=32", "low.learning_starts=32"]
+    low = ["low.hidden=[32, 32]", "low.skill=null", "low.batch_size=32", "low.learning_starts=32"]
     cfg = RunConfig(task="stack_cubes", steps=200, seed=2, low_level="learned", checkpoint_steps=1,
                     overrides=SMOKE + low)
     train(cfg, out, progress=False, max_episodes=1)

@@ -155,7 +155,9 @@ def test_actions_respect_the_bounds_and_greedy_actions_are_deterministic():
     acts = np.stack([agent.act(np.random.default_rng(i).uniform(-1, 1, 2).astype(np.float32), 0, 1.0, env)
                      for i in range(300)])
     assert acts.dtype == np.float32 and (acts >= low - 1e-6).all() and (acts <= high + 1e-6).all()
-    assert (acts.min(0) < low + 0.05).all() and (acts.max(0) > high - 0.05).all()   # noise reaches the bounds
+    move = slice(0, 2)                   # the motion; the gripper is the target's command, clipped to its bounds
+    assert (acts.min(0)[move] < low[move] + 0.05).all() and (acts.max(0)[move] > high[move] - 0.05).all()
+    assert (acts[:, 2] == 1.0).all()     # sub-goal 0 commands +1
     obs = np.array([0.3, -0.2], np.float32)
     np.testing.assert_array_equal(agent.act(obs, 1, 0.0, env), agent.act(obs, 1, 0.0, env))
 
@@ -215,3 +217,15 @@ def test_observation_normaliser_matches_numpy_over_batches_and_round_trips():
     env = PointMass()
     env.reset(seed=0)
     assert agent.act(np.zeros(2, np.float32), 0, 0.0, env).shape == (3,)
+
+
+def test_the_gripper_command_is_the_targets_also_when_exploring():
+    """Exploration moves the hand at random but never opens a hand that carries an object."""
+    env = PointMass(n_targets=2)
+    agent = make_agent(3)
+    obs, _ = env.reset(seed=3)
+    for g in (0, 1):
+        _, grip = env.subgoal_target(g)
+        actions = np.stack([agent.act(obs, g, 1.0, env) for _ in range(200)])
+        assert (actions[:, 2] == grip).all() and actions[:, :2].std(0).min() > 0.1
+        assert agent.act(obs, g, 0.0, env)[2] == grip

@@ -345,10 +345,14 @@ class SubgoalManipulationEnv(ManipulationEnv):
         return self.is_placed_on(args["object"], args["onto"], contacts)
 
     def _place_on_target(self, args, contacts):
+        """Pick the object up where it lies (as ``collect`` does), carry it over the support, open.
+
+        A place option is complete on its own: not holding the object, its target is the pick, so a
+        high level that chooses ``place_red_on_target`` first needs no separate grasp option, and an
+        object dropped off-centre is picked up again."""
         name, support = args["object"], args["onto"]
         if not self.is_grasped(name, contacts):
-            # released (or never held): back off above the support with the gripper open
-            return self._route(self.place_top(support) + np.array([0.0, 0.0, self.hover_height])), OPEN
+            return self._pick(name, contacts)
         return self._carry_to(name, self.place_top(support), release_height=0.004)
 
     def _carry_to(self, name: str, surface: np.ndarray, release_height: float) -> tuple[np.ndarray, float]:

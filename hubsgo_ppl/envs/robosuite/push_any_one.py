@@ -7,11 +7,13 @@ from robosuite.models.objects import BoxObject
 from robosuite.models.tasks import ManipulationTask
 from robosuite.utils.placement_samplers import SequentialCompositeSampler, UniformRandomSampler
 
+from ...specs import SpecError
 from .base import CLOSED, SubgoalKind, SubgoalManipulationEnv
 
 __all__ = ["PushAnyOne"]
 
-_RGBA = {"red": (1, 0, 0, 1), "green": (0, 1, 0, 1), "blue": (0, 0, 1, 1)}
+_RGBA = {"red": (1, 0, 0, 1), "green": (0, 1, 0, 1), "blue": (0, 0, 1, 1), "yellow": (1, 1, 0, 1),
+         "magenta": (1, 0, 1, 1), "cyan": (0, 1, 1, 1)}
 
 
 class PushAnyOne(SubgoalManipulationEnv):
@@ -48,6 +50,14 @@ class PushAnyOne(SubgoalManipulationEnv):
     y within 2 cm of its slot, no rotation. The pads' colours are a random permutation of the far
     slots (x = 0.12, y = -0.15, 0, 0.15). Pass ``placement_initializer`` to swap the cube sampler.
 
+    A push whose pad lies in another row goes along x to a staging line ``stage_gap`` short of the
+    pads, then along y, then onto the pad, so the cube never rests on or crosses another colour's
+    pad (which would count as a wrong-colour push in the critic's evidence).
+
+    The catalogue option ``colours`` (e.g. ``[red, green, blue, yellow]``, at most four of red,
+    green, blue, yellow, magenta, cyan) sets the cubes and pads, one row each, spread over the same
+    30 cm.
+
     ## Sub-goal catalogue (``envs/push_any_one.yaml``)
 
     | name | kind | achieved when |
@@ -64,20 +74,35 @@ class PushAnyOne(SubgoalManipulationEnv):
     """
 
     colours = ("red", "green", "blue")
+    max_colours = 4         # rows 10 cm apart at most: a cube's 2 cm jitter keeps clear of its neighbours
     # low sliding friction so a push at finger height slides the cube instead of tipping it over
     table_friction = (0.3, 5e-3, 1e-4)
     cube_friction = (0.3, 5e-3, 1e-4)
     cube_half = 0.02
-    slots_y = (-0.15, 0.0, 0.15)
+    slots_y = (-0.15, 0.0, 0.15)    # with other colours: that many rows spread over the same 30 cm
     cube_x_range = (-0.10, -0.06)
     pad_x = 0.12
     push_tolerance = 0.03   # push_to: cube centre within this of the pad centre
     push_height = 0.018     # hand height above the table while pushing (fingertips clear the table)
     standoff = 0.04         # hand-to-cube-centre distance behind the cube before a push
-    # a push leg (x, then y) is done within this of the pad centre; the x leg is looser so the
+    # a push leg (along x or y) is done within this of its end; the x leg is looser so the
     # small x drift of the y leg does not send the hand back round the cube
     leg_tolerance = (0.025, 0.01)
     push_step = 0.02        # how far ahead of the hand a push target lies (sets the push speed)
+    # a cube that must change rows is first pushed to this gap short of the pads' row, then along it,
+    # so it never rests on (or crosses) a pad other than its target
+    stage_gap = 0.07
+
+    def __init__(self, catalogue, *args, colours: tuple[str, ...] | list[str] = ("red", "green", "blue"), **kwargs):
+        """``colours`` (a catalogue option): the cubes and their pads, one row each."""
+        colours = tuple(colours) if isinstance(colours, (list, tuple)) else (colours,)
+        if not 1 <= len(colours) <= self.max_colours or len(set(colours)) != len(colours) \
+                or not set(colours) <= set(_RGBA):
+            raise SpecError(f"{getattr(catalogue, 'source', 'catalogue')}: options.colours: {list(colours)} is not "
+                            f"1 to {self.max_colours} distinct colours of: {', '.join(_RGBA)}")
+        self.colours = colours
+        self.slots_y = tuple(float(y) for y in np.linspace(-0.15, 0.15, len(colours))) if len(colours) > 1 else (0.0,)
+        super().__init__(catalogue, *args, **kwargs)
 
     def _load_model(self):
         arena = self._load_table()
@@ -131,18 +156,33 @@ class PushAnyOne(SubgoalManipulationEnv):
                                        lambda a, c: self.is_pushed_to(a["object"], a["to"], c), self._push_target)
         return kinds
 
+    def _push_leg(self, cube: np.ndarray, pad: np.ndarray) -> tuple[int, np.ndarray] | None:
+        """The current leg of a push as (axis, the cube's offset to the leg's end), None when done.
+
+        A cube in the pad's row goes straight along x. Otherwise it goes along x to ``stage_gap``
+        short of the pads' row, then along y into the pad's row, then along x onto the pad: it never
+        stops on, or slides across, a pad of another colour (which would count as that pad's push)."""
+        tol_x, tol_y = self.leg_tolerance
+        stage_x = pad[0] - self.stage_gap
+        if abs(pad[1] - cube[1]) > tol_y and cube[0] < stage_x - tol_x:
+            return 0, np.array([stage_x - cube[0], 0.0])
+        if abs(pad[1] - cube[1]) > tol_y:
+            return 1, np.array([0.0, pad[1] - cube[1]])
+        if abs(pad[0] - cube[0]) > tol_x:
+            return 0, np.array([pad[0] - cube[0], 0.0])
+        return None
+
     def _push_target(self, args, contacts):
-        """Push in two axis-aligned legs (x, then y), each on a face normal so the cube slides straight.
+        """Push in axis-aligned legs (:meth:`_push_leg`), each on a face normal so the cube slides straight.
 
         Per leg: get behind the cube on the leg's line (lifting over it when on the wrong side), then
         push with the target at most ``push_step`` ahead of the hand.
         """
         cube = self.object_position(args["object"])
-        offset = self.place_top(args["to"])[:2] - cube[:2]
-        legs = [axis for axis in (0, 1) if abs(offset[axis]) > self.leg_tolerance[axis]]
-        if self.is_pushed_to(args["object"], args["to"], contacts) or not legs:
+        leg = self._push_leg(cube[:2], self.place_top(args["to"])[:2])
+        if self.is_pushed_to(args["object"], args["to"], contacts) or leg is None:
             return self._route(cube + np.array([0.0, 0.0, self.hover_height])), CLOSED
-        axis = legs[0]
+        axis, offset = leg
         u = np.zeros(2)
         u[axis] = np.sign(offset[axis])
         eef = self.eef_position()

@@ -60,6 +60,10 @@ class StackCubes(SubgoalManipulationEnv):
     | place_green_on_target | place_on | (wrong order) green cube on the pad |
     | place_red_on_green | place_on | (wrong order) red cube on the green cube |
 
+    A place option is complete on its own: not holding its cube, its target first picks the cube up
+    (as ``collect`` does), so two options, place_red_on_target then place_green_on_red, solve the
+    task, and the grasps are achieved on the way.
+
     G* (the dependency chain): grasp_red -> place_red_on_target -> grasp_green -> place_green_on_red.
 
     ## Registered Configurations
