@@ -63,7 +63,7 @@ def test_shipped_grids(tmp_path):
     assert ("hdqn", "keydoor") in runs and ("hiro", "fourroom") in runs
     t1 = validate_spec(SweepSpec, yaml.safe_load((Path(_).parent / "table1.yaml").read_text()), "table1.yaml")
     assert [t.name for t in t1.tasks] == ["fourroom", "keydoor", "stack_cubes", "push_any_one", "collect_three_balls"]
-    assert {v.agent for v in t1.variants} == {"hubsgo", "ddqn", "ppo", "td3", "hdqn", "hiro"}
+    assert {v.agent for v in t1.variants} == {"hubsgo", "ddqn", "ppo", "td3", "hdqn", "hiro", "higl"}
 
 
 def test_every_shipped_sweep_plans_and_the_ten_seed_grid_extends_the_acceptance_runs(tmp_path):
