@@ -8,8 +8,7 @@ from hubsgo_ppl.agents.presets import PRESETS, TASK_PRESETS, apply_overrides, pr
 def test_task_settings_merge_over_the_family_defaults():
     cfg = preset("robosuite", "stack_cubes")
     assert cfg["steps"] == 20_000 and cfg["env"] == {"horizon": 400}
-    assert cfg["loop"]["option_steps"] == 40
-    assert cfg["loop"]["filter_fraction"] == PRESETS["robosuite"]["loop"]["filter_fraction"]   # kept
+    assert cfg["loop"] == PRESETS["robosuite"]["loop"]      # the family's options and schedules, unchanged
     assert preset("robosuite", "push_any_one")["steps"] == 8_000
     assert preset("minigrid", "keydoor") == PRESETS["minigrid"]              # mazes have no own settings
     assert set(TASK_PRESETS) == {"stack_cubes", "push_any_one", "collect_three_balls"}
