@@ -34,10 +34,10 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Literal
 
 import numpy as np
-from minigrid.core.constants import COLOR_NAMES
 from pydantic import BaseModel, ValidationError, field_validator, model_validator
 
 from ...specs import SpecError, StrictModel, format_validation_error
+from .layout import colour_ok
 
 __all__ = ["KINDS", "Scene", "Kind", "compile_kind", "scan", "regions", "route_doors", "goal_cell", "new_scene"]
 
@@ -53,12 +53,7 @@ class _Selector(StrictModel):
     color: str | None = None
     locked: bool | None = None
 
-    @field_validator("color")
-    @classmethod
-    def _colour_ok(cls, v: str | None) -> str | None:
-        if v is not None and v not in COLOR_NAMES:
-            raise ValueError(f"unknown colour {v!r}; use one of: {', '.join(COLOR_NAMES)}")
-        return v
+    _colour_ok = field_validator("color")(classmethod(lambda cls, v: colour_ok(v)))
 
     @model_validator(mode="after")
     def _locked_is_for_doors(self) -> _Selector:

@@ -73,6 +73,13 @@ COMMENT = ";"
 _BUILTIN = {"#": "wall", ".": "empty", " ": "empty", "A": "agent", "G": "goal", "~": "lava"}
 
 
+def colour_ok(v: str | None) -> str | None:
+    """A MiniGrid colour name (or None), else a ValueError that lists them."""
+    if v is not None and v not in COLOR_NAMES:
+        raise ValueError(f"unknown colour {v!r}; use one of: {', '.join(COLOR_NAMES)}")
+    return v
+
+
 class LegendEntry(StrictModel):
     """What one layout character stands for."""
 
@@ -81,12 +88,7 @@ class LegendEntry(StrictModel):
     locked: bool = Field(default=False, description="doors only: needs the key of its colour")
     open: bool = Field(default=False, description="doors only: starts open")
 
-    @field_validator("color")
-    @classmethod
-    def _colour_ok(cls, v: str | None) -> str | None:
-        if v is not None and v not in COLOR_NAMES:
-            raise ValueError(f"unknown colour {v!r}; use one of: {', '.join(COLOR_NAMES)}")
-        return v
+    _colour_ok = field_validator("color")(classmethod(lambda cls, v: colour_ok(v)))
 
     @model_validator(mode="after")
     def _consistent(self) -> LegendEntry:
