@@ -22,7 +22,6 @@ def test_the_skill_file_is_small_and_holds_only_tensors_and_plain_data():
 
 
 @pytest.mark.mujoco
-@pytest.mark.slow
 def test_the_skill_reaches_held_out_targets_and_does_not_fit_other_networks():
     pytest.importorskip("robosuite")
     sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
