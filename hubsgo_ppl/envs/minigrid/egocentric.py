@@ -61,22 +61,29 @@ def static_map(lay: Layout) -> np.ndarray:
     return static
 
 
-def observe(env: Any) -> np.ndarray:
-    """The egocentric observation of ``env`` (a :class:`~hubsgo_ppl.envs.minigrid.maze.MazeEnv`)."""
-    marks = env._marks
-    n = len(marks)
-    obs = np.zeros(env._ego_dim, np.float32)
-    obs[0] = float(env.carrying is not None)
-    obs[1:1 + n] = env._achieved(marks)
-    ax, ay = env._agent_cell()
-    fx, fy = _FORWARD[env.agent_dir]
-    scale = float(max(env.width, env.height))
-    for i, pred in enumerate(marks):
-        tx, ty = env._target(pred)
+def compose(dim: int, carrying: bool, achieved: np.ndarray, agent: tuple[int, int], direction: int,
+            targets: list[tuple[int, int]], scale: float, grid: np.ndarray) -> np.ndarray:
+    """The egocentric vector (module docstring) from its parts: ``grid`` is the padded (2, W+6, H+6)
+    blocked/lava map, ``targets`` the sub-goals' target cells, ``scale`` max(W, H)."""
+    n = len(targets)
+    obs = np.zeros(dim, np.float32)
+    obs[0] = float(carrying)
+    obs[1:1 + n] = achieved
+    ax, ay = agent
+    fx, fy = _FORWARD[direction]
+    for i, (tx, ty) in enumerate(targets):
         dx, dy = tx - ax, ty - ay
         # ahead = d . forward; right = d . (the forward vector turned clockwise on screen, y down)
         obs[1 + n + 2 * i] = (dx * fx + dy * fy) / scale
         obs[2 + n + 2 * i] = (-dx * fy + dy * fx) / scale
+    pad = VIEW // 2
+    wx, wy = _WINDOW[direction]
+    obs[1 + 3 * n:] = grid[:, wx + ax + pad, wy + ay + pad].reshape(-1)
+    return obs
+
+
+def observe(env: Any) -> np.ndarray:
+    """The egocentric observation of ``env`` (a :class:`~hubsgo_ppl.envs.minigrid.maze.MazeEnv`)."""
     grid = env._static.copy()
     pad = VIEW // 2
     for d in env._doors:
@@ -85,9 +92,9 @@ def observe(env: Any) -> np.ndarray:
     for obj in env._carriables:
         if obj is not env.carrying and obj.cur_pos is not None and obj.cur_pos[0] >= 0:
             grid[0, obj.cur_pos[0] + pad, obj.cur_pos[1] + pad] = 1.0
-    wx, wy = _WINDOW[env.agent_dir]
-    obs[1 + 3 * n:] = grid[:, wx + ax + pad, wy + ay + pad].reshape(-1)
-    return obs
+    marks = env._marks
+    return compose(env._ego_dim, env.carrying is not None, env._achieved(marks), env._agent_cell(),
+                   env.agent_dir, [env._target(pred) for pred in marks], float(max(env.width, env.height)), grid)
 
 
 def potential(env: Any) -> Callable[[torch.Tensor], torch.Tensor]:

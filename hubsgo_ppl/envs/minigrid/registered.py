@@ -275,23 +275,9 @@ class RegisteredEnv(gym.Env):
             img[x, y] = (OBJECT_TO_IDX["agent"], COLOR_TO_IDX["red"], self.inner.agent_dir)
             return img.reshape(-1).astype(np.float32)
         s, marks = self.scene, self._marks
-        n = len(marks)
-        obs = np.zeros(self.observation_space.shape[0], np.float32)
-        obs[0] = float(s.carrying is not None)
-        obs[1:1 + n] = self._held
-        ax, ay = s.agent
-        d = self.inner.agent_dir
-        fx, fy = egocentric._FORWARD[d]
-        scale = float(max(self.width, self.height))
-        for i, k in enumerate(marks):
-            tx, ty = k.target(s)
-            dx, dy = tx - ax, ty - ay
-            obs[1 + n + 2 * i] = (dx * fx + dy * fy) / scale
-            obs[2 + n + 2 * i] = (-dx * fy + dy * fx) / scale
-        pad = egocentric.VIEW // 2
-        wx, wy = egocentric._WINDOW[d]
-        obs[1 + 3 * n:] = self._window[:, wx + ax + pad, wy + ay + pad].reshape(-1)
-        return obs
+        return egocentric.compose(self.observation_space.shape[0], s.carrying is not None, self._held, s.agent,
+                                  self.inner.agent_dir, [k.target(s) for k in marks],
+                                  float(max(self.width, self.height)), self._window)
 
 
 def make_minigrid(catalogue: str | Path | Catalogue, **kwargs: Any) -> gym.Env:
