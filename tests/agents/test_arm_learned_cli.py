@@ -28,9 +28,7 @@ def _metrics(run) -> list[dict[str, str]]:
         return list(csv.DictReader(fh))
 
 
-@pytest.mark.parametrize("task", ["push_any_one",
-                                  pytest.param("stack_cubes", marks=pytest.mark.slow),
-                                  pytest.param("collect_three_balls", marks=pytest.mark.slow)])
+@pytest.mark.parametrize("task", ["push_any_one", "stack_cubes", "collect_three_balls"])
 def test_a_learned_low_level_run_pauses_resumes_and_is_read_by_every_command(task, tmp_path):
     run = tmp_path / task
     base = ["train", task, "--low-level", "learned", "--steps", "120", "--seed", "0", "--out", str(run),
@@ -60,7 +58,6 @@ def test_the_same_seed_gives_the_same_metrics_with_the_learned_low_level(tmp_pat
     assert first[-1]["low/critic_loss"] not in ("", None)
 
 
-@pytest.mark.slow
 def test_a_user_written_arm_task_trains_on_the_family_defaults(tmp_path):
     """A catalogue the package does not ship (a fourth cube colour and its pad), with its own spec and
     nothing else: the learned low level, the robosuite family's settings."""
