@@ -98,6 +98,36 @@ def _inner(gym_id: str, source: str, **kwargs: Any) -> Any:
     return env
 
 
+PROBE_RESETS = 8
+
+
+def _probe(gym_id: str, source: str, kwargs: dict[str, Any], kinds: tuple[Kind, ...]) -> None:
+    """Refuse, in one line, a sub-goal whose objects are in none of ``PROBE_RESETS`` seeded layouts (on
+    the floor, in a box or carried at reset); reset on an env of its own, so the caller's is untouched."""
+    wanted = [(i, k, what, match) for i, k in enumerate(kinds) for what, match in k.selects]
+    if not wanted:
+        return
+    env, seen = _inner(gym_id, source, **kwargs), set()
+    try:
+        for seed in range(PROBE_RESETS):
+            env.reset(seed=seed)
+            s = new_scene(env.grid, tuple(env.agent_pos), env.carrying)
+            objs = [o for o, _ in s.objects] + [o.contains for o, _ in s.objects
+                                                if o.type == "box" and o.contains is not None]
+            objs += [env.carrying] if env.carrying is not None else []
+            seen |= {f"{o.color} {o.type}" for o in objs}
+            wanted = [(i, k, what, m) for i, k, what, m in wanted if not any(m(s, o) for o in objs)]
+            if not wanted:
+                return
+    finally:
+        env.close()
+    i, k, what, _ = wanted[0]
+    article = "an" if what[0] in "aeiou" else "a"
+    raise SpecError(f"{source}: subgoals[{i}] ({k.name}).args: {k.kind} needs {article} {what}, and {gym_id} has none in "
+                    f"{PROBE_RESETS} seeded layouts (it has: {', '.join(sorted(seen)) or 'walls only'}); "
+                    "change its args or drop it")
+
+
 class RegisteredEnv(gym.Env):
     """A registered MiniGrid environment with a catalogue's sub-goals (see the module docstring).
 
@@ -138,6 +168,7 @@ class RegisteredEnv(gym.Env):
         self._marks: tuple[Kind, ...] = self._kinds if cat.observed is None else tuple(
             compile_kind(i, sg, source) for i, sg in enumerate(marks))
         self._mark_cols = np.array([[sg.name for sg in marks].index(n) for n in self.subgoal_names], np.int64)
+        _probe(opts.gym_id, source, {"max_steps": steps} if steps else {}, self._kinds)
         self._action_map = tuple(Actions[a] for a in opts.actions)
         self.action_names = list(opts.actions)
         self.action_space = spaces.Discrete(len(self._action_map))
@@ -197,6 +228,10 @@ class RegisteredEnv(gym.Env):
         x, y = self.inner.agent_pos
         return int(x), int(y)
 
+    def _front(self) -> tuple[int, int]:
+        x, y = self.inner.front_pos
+        return int(x), int(y)
+
     def _rescan(self) -> None:
         """Re-read the objects and the window's map: channel 0, where the agent cannot step (a wall, a
         closed door, an object on the floor, outside the grid); channel 1, lava."""
@@ -219,7 +254,8 @@ class RegisteredEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         self.inner.reset(seed=seed, options=options)
         self.scene = new_scene(self.inner.grid, self._agent_cell(), self.inner.carrying,
-                               getattr(self.inner, "obj", None), getattr(self.inner, "target_pos", None))
+                               getattr(self.inner, "obj", None), getattr(self.inner, "target_pos", None),
+                               self.inner.mission, self._front())
         self._rescan()
         return self._obs(), {"subgoals": self.subgoal_achieved(), "is_success": False}
 
@@ -231,7 +267,7 @@ class RegisteredEnv(gym.Env):
         act = self._action_map[a]
         _, reward, terminated, truncated, _ = self.inner.step(act)
         s = self.scene
-        s.agent = self._agent_cell()
+        s.agent, s.front = self._agent_cell(), self._front()
         self._rescan()          # every step: some environments move their objects themselves (DynamicObstacles)
         s.success = bool(terminated) and reward > 0
         return (self._obs(), float(reward), bool(terminated), bool(truncated),
