@@ -92,3 +92,15 @@ def test_bad_arguments_of_the_new_kinds_are_named(sg, fragment):
     with pytest.raises(SpecError) as err:
         compile_kind(0, SubgoalDef(name="g", **sg), "cat.yaml")
     assert fragment in str(err.value) and "\n" not in str(err.value)
+
+
+def test_carrying_aims_at_the_box_that_holds_the_object_while_none_lies_on_the_floor():
+    hidden, loose = Key("yellow"), Key("yellow")
+    box = Box("green", contains=hidden)
+    key = kind("carrying", type="key")
+    g = room((box, (1, 3)))
+    s = new_scene(g, (2, 1))
+    assert key.target(s) == (1, 3) and kind("carrying", type="ball").target(s) == (2, 1)
+    g.set(5, 3, loose)                                          # one on the floor: that one, though farther
+    s.reread(g, None)
+    assert key.target(s) == (5, 3)

@@ -14,7 +14,8 @@ kind and args                              holds when / target
 ``goal {}``                                the environment reports success (MiniGrid's positive reward on
                                            termination) / the goal square, else the mission's object or cell,
                                            else the last object the mission text names ("the red ball")
-``carrying {type?, color?}``               the agent carries a matching object / the nearest one on the floor
+``carrying {type?, color?}``               the agent carries a matching object / the nearest one on the floor,
+                                           else the nearest box that holds one
 ``door_open {color?, locked?, route?}``    a matching door is open (``locked: true``: one locked at reset;
                                            ``route: k``: the k-th door on the shortest walk from the start to
                                            the goal's target) / the nearest matching closed door
@@ -337,8 +338,13 @@ def _compile(name: str, kind: str, args: Any) -> Kind:
     if kind == "goal":
         return Kind(name, kind, lambda s: s.success, lambda s: goal_cell(s) or s.agent)
     if kind == "carrying":
-        return Kind(name, kind, lambda s: s.carrying is not None and match(s, s.carrying),
-                    lambda s: s.agent if s.carrying is not None and match(s, s.carrying) else _nearest(s, cells(s)))
+        def carry_target(s: Scene) -> Cell:
+            if s.carrying is not None and match(s, s.carrying):
+                return s.agent
+            return _nearest(s, cells(s) or [c for o, c in s.objects if o.type == "box" and o.contains is not None
+                                            and match(s, o.contains)])
+
+        return Kind(name, kind, lambda s: s.carrying is not None and match(s, s.carrying), carry_target)
     if kind == "door_open":
         route = args.route
 

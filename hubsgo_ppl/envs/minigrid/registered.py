@@ -173,6 +173,11 @@ class RegisteredEnv(gym.Env):
         self.action_names = list(opts.actions)
         self.action_space = spaces.Discrete(len(self._action_map))
         W, H = self.inner.width, self.inner.height
+        for i, sg in enumerate(cat.subgoals):
+            x, y = sg.args.get("cell", (0, 0)) if sg.kind == "at" else (0, 0)
+            if not (0 <= x < W and 0 <= y < H):
+                raise SpecError(f"{source}: subgoals[{i}] ({sg.name}).args.cell: [{x}, {y}] is outside "
+                                f"{opts.gym_id}'s {W}x{H} grid; x counts from 0 to {W - 1}, y from 0 to {H - 1}")
         if self.obs_mode == "egocentric":
             self.observation_space = spaces.Box(-1.0, 1.0, (egocentric.dim(len(marks)),), np.float32)
         else:
