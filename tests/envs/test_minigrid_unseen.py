@@ -104,3 +104,38 @@ def test_carrying_aims_at_the_box_that_holds_the_object_while_none_lies_on_the_f
     g.set(5, 3, loose)                                          # one on the floor: that one, though farther
     s.reread(g, None)
     assert key.target(s) == (5, 3)
+
+
+@pytest.mark.parametrize("name", ["minigrid_obstructed_1dlh", "minigrid_redbluedoors", "minigrid_lavagap",
+                                  "minigrid_putnear"])
+def test_a_stranger_s_catalogue_checks_trains_and_is_read(name, tmp_path, capsys):
+    cat, spec, run = FIXTURES / f"{name}.yaml", FIXTURES / f"{name}-spec.yaml", tmp_path / name
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["check-env", str(cat), "--steps", "30"]) == 0
+        assert main(["train", str(cat), "--model", str(spec), "--steps", "300", "--set", "env.max_steps=60",
+                     "--out", str(run), "--no-progress"]) == 0
+        assert main(["subgoals", str(run)]) == 0
+    assert (run / "checkpoint.pt").is_file()
+    assert "marginals" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("gym_id, subgoal, fragment", [
+    ("MiniGrid-Empty-8x8-v0", "{name: key, kind: carrying, args: {type: key}}",
+     "subgoals[0] (key).args: carrying needs a key, and MiniGrid-Empty-8x8-v0 has none"),
+    ("MiniGrid-DoorKey-5x5-v0", "{name: key, kind: carrying, args: {type: key, color: red}}",
+     "needs a red key, and MiniGrid-DoorKey-5x5-v0 has none in 8 seeded layouts (it has: green goal, yellow door, "
+     "yellow key)"),
+    ("MiniGrid-RedBlueDoors-6x6-v0", "{name: door, kind: door_open, args: {locked: true}}", "needs a locked door"),
+    ("MiniGrid-PutNear-6x6-N2-v0", "{name: p, kind: placed_near, args: {type: ball, near: {type: door}}}",
+     "placed_near needs a door"),
+    ("MiniGrid-Empty-5x5-v0", "{name: spot, kind: at, args: {cell: [9, 2]}}", "[9, 2] is outside"),
+    ("MiniGrid-DoorKey-5x5-v0", "{name: key, kind: carrying, args: {colour: yellow}}", "args.colour: unknown key"),
+])
+def test_a_stranger_s_mistakes_exit_2_with_one_line(gym_id, subgoal, fragment, tmp_path, capsys):
+    path = tmp_path / "mine.yaml"
+    path.write_text(f"task: mine\nfamily: minigrid\noptions: {{gym_id: {gym_id}}}\nsubgoals:\n  - {subgoal}\n"
+                    "  - {name: goal, kind: goal}\n")
+    assert main(["check-env", str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and fragment in err[0], err
