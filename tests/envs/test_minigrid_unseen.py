@@ -139,3 +139,20 @@ def test_a_stranger_s_mistakes_exit_2_with_one_line(gym_id, subgoal, fragment, t
     assert main(["check-env", str(path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and fragment in err[0], err
+
+
+def test_a_river_of_lava_parts_rooms_and_its_opening_is_a_gap():
+    from minigrid.core.world_object import Goal, Lava
+
+    g = Grid(7, 6)
+    g.wall_rect(0, 0, 7, 6)
+    for y in (1, 2, 4):                                         # lava at x=3, an opening at (3, 3)
+        g.set(3, y, Lava())
+    g.set(5, 2, Goal())
+    room_of_goal = kind("in_room", type="goal")
+    s = new_scene(g, (1, 1))
+    assert not room_of_goal.holds(s)
+    s.agent = (3, 3)                                            # in the opening: in no room
+    assert not room_of_goal.holds(s)
+    s.agent = (4, 4)
+    assert room_of_goal.holds(s)

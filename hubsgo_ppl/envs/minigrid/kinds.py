@@ -23,7 +23,8 @@ kind and args                              holds when / target
 ``cleared {type?, color?}``                no matching key, ball or box lies next to a door (a blocked
                                            doorway is free) / the nearest object that still blocks one
 ``in_room {type, color?}``                 the agent is in the room of a matching object (rooms: the floor
-                                           split by walls, doors and one-cell gaps in a wall) / that object
+                                           split by walls, lava, doors and one-cell gaps in a wall or a river
+                                           of lava) / that object
 ``at {cell: [x, y]}``                      the agent stands on the cell / the cell
 ``at {type, color?, locked?}``             the agent stands on or next to a matching object / the nearest one
 ``facing {type, color?, locked?}``         the cell in front of the agent holds a matching object / the
@@ -178,7 +179,7 @@ def new_scene(grid: Any, agent: Cell, carrying: Any = None, mission_obj: Any = N
     doors = {cell: id(obj) for obj, cell in s.objects if obj.type == "door"}
     s.locked_at_reset = frozenset(id(obj) for obj, _ in s.objects if obj.type == "door" and obj.is_locked)
     s.boxes_at_reset = {id(obj): obj for obj, _ in s.objects if obj.type == "box"}
-    s.rooms = regions(s.walls, set(doors))
+    s.rooms = regions(s.walls | s.lava, set(doors))          # a river of lava parts rooms as a wall does
     s.route = route_doors(s.walls, doors, s.agent, goal_cell(s))
     return s
 

@@ -31,6 +31,8 @@ channel 1 on lava. ``obs_mode: image`` is MiniGrid's full-grid encoding, ``W*H*3
 
 from __future__ import annotations
 
+import contextlib
+import io
 from pathlib import Path
 from typing import Any, Literal
 
@@ -101,16 +103,28 @@ def _inner(gym_id: str, source: str, **kwargs: Any) -> Any:
 PROBE_RESETS = 8
 
 
+def _quiet_reset(env: Any, seed: int | None, options: dict[str, Any] | None = None) -> None:
+    """``env.reset``, with what MiniGrid's generators print (BabyAI's rejected samples) kept off stdout."""
+    with contextlib.redirect_stdout(io.StringIO()):
+        env.reset(seed=seed, options=options)
+
+
 def _probe(gym_id: str, source: str, kwargs: dict[str, Any], kinds: tuple[Kind, ...]) -> None:
-    """Refuse, in one line, a sub-goal whose objects are in none of ``PROBE_RESETS`` seeded layouts (on
-    the floor, in a box or carried at reset); reset on an env of its own, so the caller's is untouched."""
+    """Refuse, in one line, an env that cannot generate a layout, and a sub-goal whose objects are in none
+    of ``PROBE_RESETS`` seeded layouts (on the floor, in a box or carried at reset); reset on an env of its
+    own, so the caller's is untouched."""
     wanted = [(i, k, what, match) for i, k in enumerate(kinds) for what, match in k.selects]
-    if not wanted:
-        return
     env, seen = _inner(gym_id, source, **kwargs), set()
     try:
         for seed in range(PROBE_RESETS):
-            env.reset(seed=seed)
+            try:
+                _quiet_reset(env, seed)
+            except Exception as exc:        # e.g. a generator whose optional dependencies are missing
+                raise SpecError(f"{source}: options.gym_id: {gym_id!r} could not generate a layout "
+                                f"({type(exc).__name__}: {' '.join(str(exc).split())}); use a MiniGrid id "
+                                "whose dependencies are installed") from None
+            if not wanted:
+                return
             s = new_scene(env.grid, tuple(env.agent_pos), env.carrying)
             objs = [o for o, _ in s.objects] + [o.contains for o, _ in s.objects
                                                 if o.type == "box" and o.contains is not None]
@@ -257,7 +271,7 @@ class RegisteredEnv(gym.Env):
         self._window = grid
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        self.inner.reset(seed=seed, options=options)
+        _quiet_reset(self.inner, seed, options)
         self.scene = new_scene(self.inner.grid, self._agent_cell(), self.inner.carrying,
                                getattr(self.inner, "obj", None), getattr(self.inner, "target_pos", None),
                                self.inner.mission, self._front())
