@@ -133,9 +133,20 @@ def test_a_stranger_s_catalogue_checks_trains_and_is_read(name, tmp_path, capsys
     ("MiniGrid-DoorKey-5x5-v0", "{name: key, kind: carrying, args: {colour: yellow}}", "args.colour: unknown key"),
 ])
 def test_a_stranger_s_mistakes_exit_2_with_one_line(gym_id, subgoal, fragment, tmp_path, capsys):
+    _refused(tmp_path, capsys, f"family: minigrid\noptions: {{gym_id: {gym_id}}}", subgoal, fragment)
+
+
+@pytest.mark.parametrize("head, fragment", [
+    ("family: gym\noptions: {gym_id: MiniGrid-DoorKey-5x5-v0}", "carrying is a kind of family minigrid"),
+    ("family: minigrid\noptions: {env_id: MiniGrid-DoorKey-5x5-v0}", "name the environment, by gym_id"),
+])
+def test_a_stranger_s_misnamed_family_or_id_key_is_told_the_right_one(head, fragment, tmp_path, capsys):
+    _refused(tmp_path, capsys, head, "{name: key, kind: carrying, args: {type: key}}", fragment)
+
+
+def _refused(tmp_path, capsys, head: str, subgoal: str, fragment: str) -> None:
     path = tmp_path / "mine.yaml"
-    path.write_text(f"task: mine\nfamily: minigrid\noptions: {{gym_id: {gym_id}}}\nsubgoals:\n  - {subgoal}\n"
-                    "  - {name: goal, kind: goal}\n")
+    path.write_text(f"task: mine\n{head}\nsubgoals:\n  - {subgoal}\n  - {{name: goal, kind: goal}}\n")
     assert main(["check-env", str(path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and fragment in err[0], err

@@ -137,8 +137,8 @@ def _probe(gym_id: str, source: str, kwargs: dict[str, Any], kinds: tuple[Kind, 
         env.close()
     i, k, what, _ = wanted[0]
     article = "an" if what[0] in "aeiou" else "a"
-    raise SpecError(f"{source}: subgoals[{i}] ({k.name}).args: {k.kind} needs {article} {what}, and {gym_id} has none in "
-                    f"{PROBE_RESETS} seeded layouts (it has: {', '.join(sorted(seen)) or 'walls only'}); "
+    raise SpecError(f"{source}: subgoals[{i}] ({k.name}).args: {k.kind} needs {article} {what}, and {gym_id} "
+                    f"has none in {PROBE_RESETS} seeded layouts (it has: {', '.join(sorted(seen)) or 'walls only'}); "
                     "change its args or drop it")
 
 
@@ -346,6 +346,10 @@ def make_minigrid(catalogue: str | Path | Catalogue, **kwargs: Any) -> gym.Env:
             raise SpecError(f"{cat.source}: options: give either layout (an ASCII maze) or gym_id (a registered "
                             "MiniGrid environment), not both")
         return RegisteredEnv(cat, **kwargs)
+    if cat is not None and "layout" not in opts:
+        other = f"; {', '.join(map(str, opts))}: not an option here" if opts else ""
+        raise SpecError(f"{cat.source}: options: name the environment, by gym_id (a registered MiniGrid id such as "
+                        f"MiniGrid-DoorKey-8x8-v0) or by layout (an ASCII maze){other}")
     from .maze import MazeEnv
 
     return MazeEnv(catalogue, **kwargs)
