@@ -167,3 +167,25 @@ def test_a_river_of_lava_parts_rooms_and_its_opening_is_a_gap():
     assert not room_of_goal.holds(s)
     s.agent = (4, 4)
     assert room_of_goal.holds(s)
+
+
+def test_an_environment_that_cannot_generate_a_layout_is_refused_in_one_line(tmp_path, capsys):
+    import gymnasium as gym
+    from minigrid.core.mission import MissionSpace
+    from minigrid.minigrid_env import MiniGridEnv
+
+    class Broken(MiniGridEnv):
+        def __init__(self, **kwargs):
+            super().__init__(mission_space=MissionSpace(mission_func=lambda: "get to the goal"), grid_size=5,
+                             max_steps=10, **kwargs)
+
+        def _gen_grid(self, width, height):
+            raise ModuleNotFoundError("No module named 'imageio'\nsecond line")
+
+    gym.register("HubsgoTest-Broken-v0", entry_point=Broken)
+    try:
+        _refused(tmp_path, capsys, "family: minigrid\noptions: {gym_id: HubsgoTest-Broken-v0}",
+                 "{name: key, kind: carrying, args: {type: key}}",
+                 "could not generate a layout (ModuleNotFoundError: No module named 'imageio' second line)")
+    finally:
+        del gym.registry["HubsgoTest-Broken-v0"]
