@@ -189,3 +189,13 @@ def test_an_environment_that_cannot_generate_a_layout_is_refused_in_one_line(tmp
                  "could not generate a layout (ModuleNotFoundError: No module named 'imageio' second line)")
     finally:
         del gym.registry["HubsgoTest-Broken-v0"]
+
+
+def test_carrying_anything_aims_at_what_can_be_picked_up_not_at_a_door():
+    from minigrid.core.world_object import Goal
+
+    g = room((Door("green"), (4, 2)), (Goal(), (3, 3)), (Ball("red"), (1, 1)))
+    held = kind("carrying")
+    s = new_scene(g, (3, 2))
+    assert held.target(s) == (1, 1)                             # the door and the goal square are nearer
+    assert not kind("placed_near", near={}).holds(s)            # the ball is next to nothing

@@ -275,10 +275,14 @@ def _nearest(s: Scene, cells: list[Cell]) -> Cell:
 
 
 def _matcher(args: _Selector) -> Callable[[Scene, Any], bool]:
+    """Whether an object matches ``args``; with no ``type``, of what a carrying kind can hold, a key, ball
+    or box, and else of anything on the floor."""
     t, c, locked = args.type, args.color, args.locked
+    types = _CARRIABLE if t is None and isinstance(args, _CarryingArgs) else None
 
     def match(s: Scene, obj: Any) -> bool:
-        return ((t is None or obj.type == t) and (c is None or obj.color == c)
+        return ((obj.type == t if t is not None else types is None or obj.type in types)
+                and (c is None or obj.color == c)
                 and (locked is None or (obj.type == "door" and (id(obj) in s.locked_at_reset) == locked)))
 
     return match
@@ -298,7 +302,8 @@ class Kind:
 
 def _named(args: _Selector) -> str:
     """What a selector names, in words: 'red key', 'locked door', 'object'."""
-    return " ".join(w for w in (args.color, "locked" if args.locked else None, args.type or "object") if w)
+    what = args.type or ("key, ball or box" if isinstance(args, _CarryingArgs) else "object")
+    return " ".join(w for w in (args.color, "locked" if args.locked else None, what) if w)
 
 
 def goal_cell(s: Scene) -> Cell | None:
