@@ -134,7 +134,11 @@ def _test(sg: SubgoalDef, source: str) -> Callable[[Any, Any, dict, bool], bool]
     """The achievement test of one sub-goal: ``test(env, obs, info, success) -> bool``."""
     where = f"{source}: sub-goal {sg.name!r}"
     if sg.kind not in KINDS:
-        raise SpecError(f"{where}: unknown kind {sg.kind!r} for family gym; use one of: {', '.join(KINDS)}")
+        from .minigrid.kinds import KINDS as MINIGRID_KINDS
+
+        hint = (f"; {sg.kind} is a kind of family minigrid: a catalogue of a MiniGrid id takes family: minigrid"
+                if sg.kind in MINIGRID_KINDS else "")
+        raise SpecError(f"{where}: unknown kind {sg.kind!r} for family gym; use one of: {', '.join(KINDS)}{hint}")
     missing = [a for a in KINDS[sg.kind] if not isinstance(sg.args.get(a), str) or not sg.args.get(a)]
     if missing:
         raise SpecError(f"{where}: kind {sg.kind} needs args.{missing[0]} (a name), e.g. "

@@ -12,8 +12,10 @@ cell where nothing is left to reach. docs/minigrid.md is the catalogue reference
 kind and args                              holds when / target
 =========================================  ===============================================================
 ``goal {}``                                the environment reports success (MiniGrid's positive reward on
-                                           termination) / the goal square, else the mission's object or cell
-``carrying {type?, color?}``               the agent carries a matching object / the nearest one on the floor
+                                           termination) / the goal square, else the mission's object or cell,
+                                           else the last object the mission text names ("the red ball")
+``carrying {type?, color?}``               the agent carries a matching object / the nearest one on the floor,
+                                           else the nearest box that holds one
 ``door_open {color?, locked?, route?}``    a matching door is open (``locked: true``: one locked at reset;
                                            ``route: k``: the k-th door on the shortest walk from the start to
                                            the goal's target) / the nearest matching closed door
@@ -21,9 +23,15 @@ kind and args                              holds when / target
 ``cleared {type?, color?}``                no matching key, ball or box lies next to a door (a blocked
                                            doorway is free) / the nearest object that still blocks one
 ``in_room {type, color?}``                 the agent is in the room of a matching object (rooms: the floor
-                                           split by walls, doors and one-cell gaps in a wall) / that object
+                                           split by walls, lava, doors and one-cell gaps in a wall or a river
+                                           of lava) / that object
 ``at {cell: [x, y]}``                      the agent stands on the cell / the cell
 ``at {type, color?, locked?}``             the agent stands on or next to a matching object / the nearest one
+``facing {type, color?, locked?}``         the cell in front of the agent holds a matching object / the
+                                           nearest one
+``placed_near {type?, color?, near}``      a matching object lies on the floor within one cell (diagonals
+                                           too) of another that ``near: {type?, color?}`` matches / while one
+                                           is carried, the nearest ``near`` object, else the nearest one
 =========================================  ===============================================================
 """
 
@@ -33,7 +41,10 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Callable, Literal
 
+import re
+
 import numpy as np
+from minigrid.core.constants import COLOR_NAMES
 from pydantic import BaseModel, ValidationError, field_validator, model_validator
 
 from ...specs import SpecError, StrictModel, format_validation_error
@@ -98,13 +109,30 @@ class _AtArgs(_Selector):
         return self
 
 
+class _FacingArgs(_Selector):
+    type: Literal["key", "ball", "box", "door", "goal", "lava"]
+
+
+class _NearArgs(_CarryingArgs):
+    type: Literal["key", "ball", "box"] | None = None
+    near: _Selector
+
+
 class _NoArgs(StrictModel):
     pass
 
 
 KINDS: dict[str, type[BaseModel]] = {"goal": _NoArgs, "carrying": _CarryingArgs, "door_open": _DoorArgs,
                                      "box_open": _BoxArgs, "cleared": _Selector, "in_room": _InRoomArgs,
-                                     "at": _AtArgs}
+                                     "at": _AtArgs, "facing": _FacingArgs, "placed_near": _NearArgs}
+_MISSION = re.compile(rf"\b(?:({'|'.join(COLOR_NAMES)}) )?(key|ball|box|door)\b")
+
+
+def mission_named(mission: Any) -> tuple[str | None, str] | None:
+    """(colour or None, type) of the last object a MiniGrid mission names ("go get a blue key" ->
+    ('blue', 'key')); None when it names none."""
+    found = _MISSION.findall(mission) if isinstance(mission, str) else []
+    return (found[-1][0] or None, found[-1][1]) if found else None
 
 
 @dataclass
@@ -124,6 +152,8 @@ class Scene:
     route: tuple[int, ...] = ()                          # id() of the doors on the start-goal walk, in order
     mission_obj: Any = None                              # the env's ``obj`` (the object to fetch), if any
     mission_cell: Cell | None = None                     # the env's ``target_pos`` (the cell to go to), if any
+    mission_named: tuple[str | None, str] | None = None  # (colour, type) the mission text names last, if any
+    front: Cell | None = None                            # the cell in front of the agent
     version: int = 0                                     # raised whenever ``objects`` is read again
     walls: np.ndarray | None = None                      # (W, H) bool
     lava: np.ndarray | None = None                       # (W, H) bool
@@ -137,18 +167,19 @@ class Scene:
 
 
 def new_scene(grid: Any, agent: Cell, carrying: Any = None, mission_obj: Any = None,
-              mission_cell: Any = None) -> Scene:
+              mission_cell: Any = None, mission: str | None = None, front: Cell | None = None) -> Scene:
     """The scene of a freshly reset ``grid`` (a MiniGrid ``Grid``): what is locked, the boxes, the rooms
     and the doors on the way from ``agent`` to the goal are recorded from it."""
     cell = None if mission_cell is None else (int(mission_cell[0]), int(mission_cell[1]))
     s = Scene(grid.width, grid.height, [], None, (int(agent[0]), int(agent[1])), mission_obj=mission_obj,
-              mission_cell=cell)
+              mission_cell=cell, mission_named=mission_named(mission),
+              front=None if front is None else (int(front[0]), int(front[1])))
     s.objects, s.walls, s.lava = scan(grid)
     s.carrying = carrying
     doors = {cell: id(obj) for obj, cell in s.objects if obj.type == "door"}
     s.locked_at_reset = frozenset(id(obj) for obj, _ in s.objects if obj.type == "door" and obj.is_locked)
     s.boxes_at_reset = {id(obj): obj for obj, _ in s.objects if obj.type == "box"}
-    s.rooms = regions(s.walls, set(doors))
+    s.rooms = regions(s.walls | s.lava, set(doors))          # a river of lava parts rooms as a wall does
     s.route = route_doors(s.walls, doors, s.agent, goal_cell(s))
     return s
 
@@ -244,10 +275,14 @@ def _nearest(s: Scene, cells: list[Cell]) -> Cell:
 
 
 def _matcher(args: _Selector) -> Callable[[Scene, Any], bool]:
+    """Whether an object matches ``args``; with no ``type``, of what a carrying kind can hold, a key, ball
+    or box, and else of anything on the floor."""
     t, c, locked = args.type, args.color, args.locked
+    types = _CARRIABLE if t is None and isinstance(args, _CarryingArgs) else None
 
     def match(s: Scene, obj: Any) -> bool:
-        return ((t is None or obj.type == t) and (c is None or obj.color == c)
+        return ((obj.type == t if t is not None else types is None or obj.type in types)
+                and (c is None or obj.color == c)
                 and (locked is None or (obj.type == "door" and (id(obj) in s.locked_at_reset) == locked)))
 
     return match
@@ -255,17 +290,26 @@ def _matcher(args: _Selector) -> Callable[[Scene, Any], bool]:
 
 @dataclass(frozen=True)
 class Kind:
-    """A compiled sub-goal: ``holds(scene)`` and ``target(scene) -> (x, y)``."""
+    """A compiled sub-goal: ``holds(scene)`` and ``target(scene) -> (x, y)``; ``selects``, the objects it
+    needs, each as (what the catalogue names, ``match(scene, obj)``)."""
 
     name: str
     kind: str
     holds: Callable[[Scene], bool]
     target: Callable[[Scene], Cell]
+    selects: tuple[tuple[str, Callable[[Scene, Any], bool]], ...] = ()
+
+
+def _named(args: _Selector) -> str:
+    """What a selector names, in words: 'red key', 'locked door', 'object'."""
+    what = args.type or ("key, ball or box" if isinstance(args, _CarryingArgs) else "object")
+    return " ".join(w for w in (args.color, "locked" if args.locked else None, what) if w)
 
 
 def goal_cell(s: Scene) -> Cell | None:
     """The goal square nearest the agent, else the mission's object (carried: the agent's cell), else the
-    mission's cell, else None."""
+    mission's cell, else the nearest object of the colour and type the mission text names last (carried:
+    the agent's cell), else None."""
     goals = [cell for obj, cell in s.objects if obj.type == "goal"]
     if goals:
         return _nearest(s, goals)
@@ -275,7 +319,14 @@ def goal_cell(s: Scene) -> Cell | None:
         for obj, cell in s.objects:
             if obj is s.mission_obj:
                 return cell
-    return s.mission_cell
+    if s.mission_cell is not None or s.mission_named is None:
+        return s.mission_cell
+    colour, kind = s.mission_named
+    named = [cell for obj, cell in s.objects if obj.type == kind and colour in (None, obj.color)]
+    if named:
+        return _nearest(s, named)
+    held = s.carrying
+    return s.agent if held is not None and held.type == kind and colour in (None, held.color) else None
 
 
 def _compile(name: str, kind: str, args: Any) -> Kind:
@@ -293,8 +344,13 @@ def _compile(name: str, kind: str, args: Any) -> Kind:
     if kind == "goal":
         return Kind(name, kind, lambda s: s.success, lambda s: goal_cell(s) or s.agent)
     if kind == "carrying":
-        return Kind(name, kind, lambda s: s.carrying is not None and match(s, s.carrying),
-                    lambda s: s.agent if s.carrying is not None and match(s, s.carrying) else _nearest(s, cells(s)))
+        def carry_target(s: Scene) -> Cell:
+            if s.carrying is not None and match(s, s.carrying):
+                return s.agent
+            return _nearest(s, cells(s) or [c for o, c in s.objects if o.type == "box" and o.contains is not None
+                                            and match(s, o.contains)])
+
+        return Kind(name, kind, lambda s: s.carrying is not None and match(s, s.carrying), carry_target)
     if kind == "door_open":
         route = args.route
 
@@ -339,6 +395,23 @@ def _compile(name: str, kind: str, args: Any) -> Kind:
             return Kind(name, kind, lambda s: s.agent == spot, lambda s: spot)
         return Kind(name, kind, lambda s: any(_dist(c, s.agent) <= 1 for c in cells(s)),
                     lambda s: _nearest(s, cells(s)))
+    if kind == "facing":
+        return Kind(name, kind, lambda s: s.front is not None and s.front in cells(s),
+                    lambda s: _nearest(s, cells(s)))
+    if kind == "placed_near":
+        near = _matcher(args.near)
+
+        def placed(s: Scene) -> bool:
+            anchors = [(o, c) for o, c in s.objects if near(s, o)]
+            return any(o is not a and max(abs(c[0] - d[0]), abs(c[1] - d[1])) <= 1
+                       for o, c in found(s) if o.type in _CARRIABLE for a, d in anchors)
+
+        def near_target(s: Scene) -> Cell:
+            if s.carrying is not None and match(s, s.carrying):
+                return _nearest(s, [c for o, c in s.objects if near(s, o)])
+            return _nearest(s, [c for o, c in found(s) if o.type in _CARRIABLE])
+
+        return Kind(name, kind, placed, near_target)
     raise AssertionError(kind)
 
 
@@ -356,4 +429,10 @@ def compile_kind(i: int, sg: Any, source: str) -> Kind:
         args = KINDS[sg.kind].model_validate(sg.args)
     except ValidationError as err:
         raise SpecError(format_validation_error(source, err, prefix=f"{key}.args")) from None
-    return _compile(sg.name, sg.kind, args)
+    k = _compile(sg.name, sg.kind, args)
+    if isinstance(args, _Selector) and not getattr(args, "cell", None):
+        sel = ((_named(args), _matcher(args)),)
+        if isinstance(args, _NearArgs):
+            sel += ((_named(args.near), _matcher(args.near)),)
+        k = Kind(k.name, k.kind, k.holds, k.target, sel)
+    return k

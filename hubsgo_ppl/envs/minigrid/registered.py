@@ -31,6 +31,8 @@ channel 1 on lava. ``obs_mode: image`` is MiniGrid's full-grid encoding, ``W*H*3
 
 from __future__ import annotations
 
+import contextlib
+import io
 from pathlib import Path
 from typing import Any, Literal
 
@@ -98,6 +100,48 @@ def _inner(gym_id: str, source: str, **kwargs: Any) -> Any:
     return env
 
 
+PROBE_RESETS = 8
+
+
+def _quiet_reset(env: Any, seed: int | None, options: dict[str, Any] | None = None) -> None:
+    """``env.reset``, with what MiniGrid's generators print (BabyAI's rejected samples) kept off stdout."""
+    with contextlib.redirect_stdout(io.StringIO()):
+        env.reset(seed=seed, options=options)
+
+
+def _probe(gym_id: str, source: str, kwargs: dict[str, Any], kinds: tuple[Kind, ...]) -> None:
+    """Refuse, in one line, an env that cannot generate a layout, and a sub-goal whose objects are in none
+    of ``PROBE_RESETS`` seeded layouts (on the floor, in a box or carried at reset); reset on an env of its
+    own, so the caller's is untouched."""
+    wanted = [(i, k, what, match) for i, k in enumerate(kinds) for what, match in k.selects]
+    env, seen = _inner(gym_id, source, **kwargs), set()
+    try:
+        for seed in range(PROBE_RESETS):
+            try:
+                _quiet_reset(env, seed)
+            except Exception as exc:        # e.g. a generator whose optional dependencies are missing
+                raise SpecError(f"{source}: options.gym_id: {gym_id!r} could not generate a layout "
+                                f"({type(exc).__name__}: {' '.join(str(exc).split())}); use a MiniGrid id "
+                                "whose dependencies are installed") from None
+            if not wanted:
+                return
+            s = new_scene(env.grid, tuple(env.agent_pos), env.carrying)
+            objs = [o for o, _ in s.objects] + [o.contains for o, _ in s.objects
+                                                if o.type == "box" and o.contains is not None]
+            objs += [env.carrying] if env.carrying is not None else []
+            seen |= {f"{o.color} {o.type}" for o in objs}
+            wanted = [(i, k, what, m) for i, k, what, m in wanted if not any(m(s, o) for o in objs)]
+            if not wanted:
+                return
+    finally:
+        env.close()
+    i, k, what, _ = wanted[0]
+    article = "an" if what[0] in "aeiou" else "a"
+    raise SpecError(f"{source}: subgoals[{i}] ({k.name}).args: {k.kind} needs {article} {what}, and {gym_id} "
+                    f"has none in {PROBE_RESETS} seeded layouts (it has: {', '.join(sorted(seen)) or 'walls only'}); "
+                    "change its args or drop it")
+
+
 class RegisteredEnv(gym.Env):
     """A registered MiniGrid environment with a catalogue's sub-goals (see the module docstring).
 
@@ -138,10 +182,16 @@ class RegisteredEnv(gym.Env):
         self._marks: tuple[Kind, ...] = self._kinds if cat.observed is None else tuple(
             compile_kind(i, sg, source) for i, sg in enumerate(marks))
         self._mark_cols = np.array([[sg.name for sg in marks].index(n) for n in self.subgoal_names], np.int64)
+        _probe(opts.gym_id, source, {"max_steps": steps} if steps else {}, self._kinds)
         self._action_map = tuple(Actions[a] for a in opts.actions)
         self.action_names = list(opts.actions)
         self.action_space = spaces.Discrete(len(self._action_map))
         W, H = self.inner.width, self.inner.height
+        for i, sg in enumerate(cat.subgoals):
+            x, y = sg.args.get("cell", (0, 0)) if sg.kind == "at" else (0, 0)
+            if not (0 <= x < W and 0 <= y < H):
+                raise SpecError(f"{source}: subgoals[{i}] ({sg.name}).args.cell: [{x}, {y}] is outside "
+                                f"{opts.gym_id}'s {W}x{H} grid; x counts from 0 to {W - 1}, y from 0 to {H - 1}")
         if self.obs_mode == "egocentric":
             self.observation_space = spaces.Box(-1.0, 1.0, (egocentric.dim(len(marks)),), np.float32)
         else:
@@ -197,6 +247,10 @@ class RegisteredEnv(gym.Env):
         x, y = self.inner.agent_pos
         return int(x), int(y)
 
+    def _front(self) -> tuple[int, int]:
+        x, y = self.inner.front_pos
+        return int(x), int(y)
+
     def _rescan(self) -> None:
         """Re-read the objects and the window's map: channel 0, where the agent cannot step (a wall, a
         closed door, an object on the floor, outside the grid); channel 1, lava."""
@@ -217,9 +271,10 @@ class RegisteredEnv(gym.Env):
         self._window = grid
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        self.inner.reset(seed=seed, options=options)
+        _quiet_reset(self.inner, seed, options)
         self.scene = new_scene(self.inner.grid, self._agent_cell(), self.inner.carrying,
-                               getattr(self.inner, "obj", None), getattr(self.inner, "target_pos", None))
+                               getattr(self.inner, "obj", None), getattr(self.inner, "target_pos", None),
+                               self.inner.mission, self._front())
         self._rescan()
         return self._obs(), {"subgoals": self.subgoal_achieved(), "is_success": False}
 
@@ -231,7 +286,7 @@ class RegisteredEnv(gym.Env):
         act = self._action_map[a]
         _, reward, terminated, truncated, _ = self.inner.step(act)
         s = self.scene
-        s.agent = self._agent_cell()
+        s.agent, s.front = self._agent_cell(), self._front()
         self._rescan()          # every step: some environments move their objects themselves (DynamicObstacles)
         s.success = bool(terminated) and reward > 0
         return (self._obs(), float(reward), bool(terminated), bool(truncated),
@@ -291,6 +346,10 @@ def make_minigrid(catalogue: str | Path | Catalogue, **kwargs: Any) -> gym.Env:
             raise SpecError(f"{cat.source}: options: give either layout (an ASCII maze) or gym_id (a registered "
                             "MiniGrid environment), not both")
         return RegisteredEnv(cat, **kwargs)
+    if cat is not None and "layout" not in opts:
+        other = f"; {', '.join(map(str, opts))}: not an option here" if opts else ""
+        raise SpecError(f"{cat.source}: options: name the environment, by gym_id (a registered MiniGrid id such as "
+                        f"MiniGrid-DoorKey-8x8-v0) or by layout (an ASCII maze){other}")
     from .maze import MazeEnv
 
     return MazeEnv(catalogue, **kwargs)
