@@ -28,14 +28,22 @@ from typing import Any, Callable, Sequence
 
 import torch
 
+from ..agents.config import HIERARCHICAL
 from ..agents.loop import UPDATE_LOW, HRLLoop
 from ..agents.low_level import GoalDQN
 from .callbacks import default_callbacks
 from .driver import RunSession, _interrupted, train
 from .lock import run_folder_lock
-from .resolved import RunConfig, RunError
+from .resolved import ResolvedRun, RunConfig, RunError
 
-__all__ = ["train_seeds", "seed_folders"]
+__all__ = ["train_seeds", "seed_folders", "stacks"]
+
+
+def stacks(run: ResolvedRun) -> bool:
+    """Whether a sweep trains the seeds of ``run`` in lockstep: the hierarchical agents with the
+    minigrid family's learned low level, whose GoalDQN networks stack. The others would run their seeds
+    one after another in one process (module docstring), so a sweep gives each of their seeds a worker."""
+    return run.agent in HIERARCHICAL and run.low_level == "learned" and run.family == "minigrid"
 
 
 def seed_folders(out: Path, seeds: Sequence[int]) -> list[Path]:

@@ -233,20 +233,21 @@ def plan(spec: SweepSpec, sweep_dir: Path, base: Path | None = None) -> list[Job
 
 def check_jobs(jobs: list[Job], path: Path) -> None:
     """Resolve each distinct configuration of the grid (spec, settings, agent, low level) as its run
-    would, and refuse the sweep in one line at the first that cannot be, naming its run."""
-    from .run import resolve
+    would, and refuse the sweep in one line at the first that cannot be, naming its run; mark the jobs
+    whose seeds train in lockstep (``Job.lockstep``)."""
+    from .lockstep import stacks
+    from .run import resolve_run
 
-    seen: set[str] = set()
+    seen: dict[str, bool] = {}
     for job in jobs:
         key = repr({k: v for k, v in job.config.items() if k != "seed"})
-        if key in seen:
-            continue
-        seen.add(key)
-        try:
-            resolve(RunConfig(**job.config))
-        except (SpecError, RunError, ValueError) as exc:
-            msg = " ".join(str(exc).split())
-            raise SpecError(f"{path}: run {job.run_id} cannot start: {msg}") from None
+        if key not in seen:
+            try:
+                seen[key] = stacks(resolve_run(RunConfig(**job.config)))
+            except (SpecError, RunError, ValueError) as exc:
+                msg = " ".join(str(exc).split())
+                raise SpecError(f"{path}: run {job.run_id} cannot start: {msg}") from None
+        job.lockstep = seen[key]
 
 
 def run_status(job: Job) -> str:

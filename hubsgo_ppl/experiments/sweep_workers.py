@@ -1,7 +1,8 @@
 """Where the runs of a sweep execute: in spawned local processes (:func:`local`) or as Ray tasks
-(:func:`ray_tasks`). The runs of a grid cell (one task and variant, several seeds) go to a worker
-together and train in lockstep in its process (:func:`run_bundle`; ``experiments.lockstep``), split
-so that every worker has a share where there are fewer cells than workers. A worker never raises: it
+(:func:`ray_tasks`). The runs of a grid cell (one task and variant, several seeds) whose networks
+stack (``Job.lockstep``) go to a worker together and train in lockstep in its process
+(:func:`run_bundle`; ``experiments.lockstep``), split so that every worker has a share where there are
+fewer cells than workers; every other run goes to a worker of its own. A worker never raises: it
 reports each run's outcome, and the sweep decides about retries."""
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ class Job:
     out: str
     budget: int
     config: dict[str, Any]       # RunConfig fields
+    lockstep: bool = False       # its seeds' networks stack (``lockstep.stacks``): train with them in one process
 
 
 # -- the worker (runs in a child process, or a Ray task) ----------------------------------------------------
@@ -87,11 +89,12 @@ def _kill_hook(job: Job) -> Any:
 
 
 def bundles(jobs: list[Job], workers: int) -> list[list[Job]]:
-    """The jobs grouped by grid cell (the same run but for its seed), in order; the largest groups
-    halved while there are fewer groups than ``workers``."""
+    """The jobs grouped by grid cell (the same run but for its seed), in order, where they train in
+    lockstep (``Job.lockstep``), and one by one otherwise; the largest groups halved while there are
+    fewer groups than ``workers``."""
     groups: dict[str, list[Job]] = {}
     for job in jobs:
-        key = repr(({k: v for k, v in job.config.items() if k != "seed"}, job.budget))
+        key = repr(({k: v for k, v in job.config.items() if k != "seed"}, job.budget)) if job.lockstep else job.run_id
         groups.setdefault(key, []).append(job)
     out = list(groups.values())
     while len(out) < workers and max(map(len, out), default=1) > 1:

@@ -9,7 +9,7 @@ import yaml
 
 from hubsgo_ppl.experiments.logger import read_csv_rows
 from hubsgo_ppl.experiments.run import RunConfig, RunError, train
-from hubsgo_ppl.experiments.sweep import KILL_ENV, SweepSpec, load_sweep, plan, run_status, run_sweep
+from hubsgo_ppl.experiments.sweep import KILL_ENV, SweepSpec, check_jobs, load_sweep, plan, run_status, run_sweep
 from hubsgo_ppl.specs import SpecError, validate_spec
 
 FAST = ["high.learning_starts=8", "high.batch_size=8", "low.learning_starts=100000", "low.hidden=[16]",
@@ -255,10 +255,17 @@ def test_the_seeds_of_a_grid_cell_train_in_lockstep_in_one_worker_each_as_it_wou
     from hubsgo_ppl.experiments.sweep_workers import bundles
 
     path = _write(tmp_path, seeds=[0, 1, 2], tasks=[{"name": "keydoor", "steps": 300}],
-                  variants=[{"name": "hdqn", "agent": "hdqn"}, {"name": "hubsgo", "agent": "hubsgo"}])
+                  variants=[{"name": "hdqn", "agent": "hdqn"}, {"name": "hubsgo", "agent": "hubsgo"},
+                            {"name": "ppo", "agent": "ppo"}])
     jobs = plan(load_sweep(path)[0], tmp_path / "p")
+    check_jobs(jobs, path)
+    stacked = [j.lockstep for j in jobs]
+    assert stacked == [True] * 6 + [False] * 3
+    # the cells whose networks stack go to a worker whole; a flat baseline's seeds, which would run one
+    # after another in one process, get a worker each
     assert [[j.run_id for j in b] for b in bundles(jobs, 2)] == [
-        [f"keydoor/hdqn/seed{s}" for s in range(3)], [f"keydoor/hubsgo/seed{s}" for s in range(3)]]
+        [f"keydoor/hdqn/seed{s}" for s in range(3)], [f"keydoor/hubsgo/seed{s}" for s in range(3)],
+        *[[f"keydoor/ppo/seed{s}"] for s in range(3)]]
     assert [len(b) for b in bundles(jobs[:3], 2)] == [2, 1]      # one cell, two workers: split in two
     assert [len(b) for b in bundles(jobs[:1], 2)] == [1]
     out = tmp_path / "sweep"
