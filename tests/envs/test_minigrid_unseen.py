@@ -11,6 +11,7 @@ from minigrid.core.grid import Grid
 from minigrid.core.world_object import Ball, Box, Door, Key, Wall
 
 from hubsgo_ppl.cli import main
+from hubsgo_ppl.envs import make
 from hubsgo_ppl.envs.minigrid.kinds import compile_kind, mission_named, new_scene
 from hubsgo_ppl.envs.subgoals import SubgoalDef
 from hubsgo_ppl.specs import SpecError
@@ -123,10 +124,6 @@ def test_a_stranger_s_catalogue_checks_trains_and_is_read(name, tmp_path, capsys
 @pytest.mark.parametrize("gym_id, subgoal, fragment", [
     ("MiniGrid-Empty-8x8-v0", "{name: key, kind: carrying, args: {type: key}}",
      "subgoals[0] (key).args: carrying needs a key, and MiniGrid-Empty-8x8-v0 has none"),
-    ("MiniGrid-DoorKey-5x5-v0", "{name: key, kind: carrying, args: {type: key, color: red}}",
-     "needs a red key, and MiniGrid-DoorKey-5x5-v0 has none in 8 seeded layouts (it has: green goal, yellow door, "
-     "yellow key)"),
-    ("MiniGrid-RedBlueDoors-6x6-v0", "{name: door, kind: door_open, args: {locked: true}}", "needs a locked door"),
     ("MiniGrid-PutNear-6x6-N2-v0", "{name: p, kind: placed_near, args: {type: ball, near: {type: door}}}",
      "placed_near needs a door"),
     ("MiniGrid-Empty-5x5-v0", "{name: spot, kind: at, args: {cell: [9, 2]}}", "[9, 2] is outside"),
@@ -134,6 +131,23 @@ def test_a_stranger_s_catalogue_checks_trains_and_is_read(name, tmp_path, capsys
 ])
 def test_a_stranger_s_mistakes_exit_2_with_one_line(gym_id, subgoal, fragment, tmp_path, capsys):
     _refused(tmp_path, capsys, f"family: minigrid\noptions: {{gym_id: {gym_id}}}", subgoal, fragment)
+
+
+@pytest.mark.parametrize("gym_id, subgoal, fragment", [
+    ("MiniGrid-DoorKey-5x5-v0", "{name: key, kind: carrying, args: {type: key, color: red}}",
+     "needs a red key, and MiniGrid-DoorKey-5x5-v0 has none in 8 seeded layouts (it has: green goal, yellow door, "
+     "yellow key); it holds only in layouts that have one"),
+    ("MiniGrid-RedBlueDoors-6x6-v0", "{name: door, kind: door_open, args: {locked: true}}", "needs a locked door"),
+])
+def test_a_colour_or_lock_the_probed_layouts_lack_is_a_warning_once_as_random_layouts_may_have_it(
+        gym_id, subgoal, fragment, tmp_path, capsys):
+    path = tmp_path / "mine.yaml"
+    path.write_text(f"task: mine\nfamily: minigrid\noptions: {{gym_id: {gym_id}}}\nsubgoals:\n  - {subgoal}\n"
+                    "  - {name: goal, kind: goal}\n")
+    make(str(path))
+    make(str(path))
+    err = capsys.readouterr().err
+    assert err.count(fragment) == 1 and err.startswith("hubsgo: warning: "), err
 
 
 @pytest.mark.parametrize("head, fragment", [
