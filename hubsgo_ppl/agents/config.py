@@ -12,7 +12,7 @@ from typing import Any, Sequence
 
 from pydantic import create_model
 
-from .presets import apply_overrides, preset
+from .presets import FAMILIES, apply_overrides, preset
 from .settings import (DERIVED, ConfigError, choice, GoalDQNConfig, GoalTD3Config, HighLevelConfig, HIGLConfig, HIROConfig, LoopConfig,
                        ScriptedMazeConfig, ScriptedOSCConfig, Settings, integer, sb3_model, validate)
 
@@ -111,10 +111,14 @@ def resolve_hyper(family: str, task: str | None, agent: str, overrides: list[str
     base, hyper = hyper, apply_overrides(hyper, list(overrides))
     if hyper.get("low_level") != default_low and "low" in hyper:
         # the preset's low section is the family default low level's; another low level gets only what
-        # --set gives it
+        # --set gives it, and the loop the family sets for it where --set does not say otherwise
         given = set_keys(overrides, "low")
         hyper["low"] = {k: v for k, v in hyper["low"].items() if k in given}
         base = {**base, "low": {k: v for k, v in base["low"].items() if k in given}}
+        other = {k: v for k, v in FAMILIES[family].other_low_loop.items() if k not in set_keys(overrides, "loop")}
+        if other:
+            hyper["loop"] = {**hyper.get("loop", {}), **other}
+            base = {**base, "loop": {**base.get("loop", {}), **other}}
     models = _models(agent, family, str(hyper.get("low_level", "learned")))
     for item in overrides:
         try:

@@ -30,6 +30,8 @@ class FamilyDefaults:
     higl: HIGLConfig
     sb3: dict[str, dict[str, Any]] = field(default_factory=dict)    # section -> SB3 keyword arguments
     env: dict[str, Any] = field(default_factory=dict)                # keyword arguments of the env
+    # loop keys that differ when a run takes the family's other low level (``--low-level``)
+    other_low_loop: dict[str, Any] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         """The dict a run's settings start from: each section holds the keys the family sets."""
@@ -57,6 +59,9 @@ FAMILIES: dict[str, FamilyDefaults] = {
     "robosuite": FamilyDefaults(
         steps=20_000, low_level="scripted", loop=LoopConfig.robosuite(), high=HighLevelConfig.robosuite(),
         low=ScriptedOSCConfig(), hiro=HIROConfig.robosuite(), higl=HIGLConfig.robosuite(),
+        # the learned low level moves more slowly than the scripted controller: a pick-and-carry takes it
+        # 90-115 steps where the scripted one takes at most 45 (docs/results.md, "robosuite arm tasks")
+        other_low_loop={"option_steps": 120},
         sb3={"td3": {"learning_rate": 1e-3, "buffer_size": 100_000, "learning_starts": 1000, "batch_size": 256,
                      "train_freq": 1, "gamma": 0.99, "noise_sigma": 0.1, "policy_kwargs": {"net_arch": [256, 256]}}}),
 }

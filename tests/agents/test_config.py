@@ -148,6 +148,11 @@ def test_resolve_merges_preset_task_and_overrides():
     hyper = resolve_hyper("robosuite", "stack_cubes", "hubsgo", ["loop.gamma=1", "high.lr=3e-4"], steps=100)
     assert hyper["steps"] == 100 and hyper["env"]["horizon"] == 400            # the task's own setting
     assert hyper["loop"]["option_steps"] == 60                                     # the family's
+    # the family's loop for its other low level (the learned one's slower pick-and-carry), unless --set
+    learned = lambda *items: resolve_hyper("robosuite", "stack_cubes", "hubsgo", list(items), low_level="learned")
+    assert learned()["loop"]["option_steps"] == 120 and learned()["low_level"] == "learned"
+    assert learned("loop.option_steps=30")["loop"]["option_steps"] == 30
+    assert resolve_hyper("minigrid", "keydoor", "hubsgo", [], low_level="scripted")["loop"]["option_steps"] == 10
     assert hyper["loop"]["gamma"] == 1.0 and hyper["high"]["lr"] == 3e-4
     assert set(section_classes("hubsgo", "robosuite", "scripted")) == {"loop", "high", "low"}
     # flat baselines: SB3's argument names, numbers written as text made numbers, the trainer's settings
