@@ -133,6 +133,30 @@ def test_a_stranger_s_mistakes_exit_2_with_one_line(gym_id, subgoal, fragment, t
     _refused(tmp_path, capsys, f"family: minigrid\noptions: {{gym_id: {gym_id}}}", subgoal, fragment)
 
 
+@pytest.mark.parametrize("options, subgoal, fragment", [
+    ("{gym_id: MiniGrid-PutNear-6x6-N2-v0}", "{name: p, kind: placed_near, args: {near: {}}}",
+     "options.actions: 'drop' is missing and subgoals[0] (p) is a placed_near sub-goal; add drop to options.actions"),
+    ("{gym_id: MiniGrid-DoorKey-5x5-v0, actions: [left, right, forward, pickup]}",
+     "{name: door, kind: door_open, args: {}}", "'toggle' is missing and subgoals[0] (door) is a door_open"),
+    ("{gym_id: MiniGrid-GoToDoor-5x5-v0}", "{name: door, kind: facing, args: {type: door}}",
+     "'done' is missing and MiniGrid-GoToDoor-5x5-v0 rewards the done action"),
+    ("{gym_id: MiniGrid-Empty-5x5-v0, actions: [left, right]}", "{name: spot, kind: at, args: {cell: [2, 2]}}",
+     "'forward' is missing and the agent could not move"),
+])
+def test_an_action_set_that_cannot_reach_a_sub_goal_or_success_is_refused(options, subgoal, fragment, tmp_path,
+                                                                          capsys):
+    _refused(tmp_path, capsys, f"family: minigrid\noptions: {options}", subgoal, fragment)
+
+
+def test_the_done_action_where_the_environment_rewards_it_is_accepted_and_taken(tmp_path):
+    path = tmp_path / "mine.yaml"
+    path.write_text("task: mine\nfamily: minigrid\noptions: {gym_id: MiniGrid-GoToDoor-5x5-v0, actions: [left, right, "
+                    "forward, done]}\nsubgoals:\n  - {name: door, kind: facing, args: {type: door}}\n"
+                    "  - {name: goal, kind: goal}\n")
+    env = make(str(path))
+    assert env.unwrapped.action_names == ["left", "right", "forward", "done"] and env.action_space.n == 4
+
+
 @pytest.mark.parametrize("gym_id, subgoal, fragment", [
     ("MiniGrid-DoorKey-5x5-v0", "{name: key, kind: carrying, args: {type: key, color: red}}",
      "needs a red key, and MiniGrid-DoorKey-5x5-v0 has none in 8 seeded layouts (it has: green goal, yellow door, "

@@ -268,7 +268,7 @@ def test_every_kind_runs_on_environments_no_catalogue_here_was_written_for(tmp_p
     def catalogue(subgoals: list[str]) -> str:
         path = tmp_path / "any.yaml"
         path.write_text(f"task: any\nfamily: minigrid\noptions: {{gym_id: {gym_id}, actions: [left, right, "
-                        "forward, pickup, drop, toggle]}\nsubgoals:\n" + "".join(f"  - {x}\n" for x in subgoals))
+                        "forward, pickup, drop, toggle, done]}\nsubgoals:\n" + "".join(f"  - {x}\n" for x in subgoals))
         return str(path)
 
     kept = []

@@ -32,6 +32,7 @@ channel 1 on lava. ``obs_mode: image`` is MiniGrid's full-grid encoding, ``W*H*3
 from __future__ import annotations
 
 import contextlib
+import inspect
 import io
 import sys
 from pathlib import Path
@@ -155,6 +156,34 @@ def _probe(gym_id: str, source: str, kwargs: dict[str, Any], kinds: tuple[Kind, 
 #: the probe's warnings already printed in this process (an env is built for each run, evaluation, seed)
 _WARNED: set[str] = set()
 
+#: the MiniGrid actions a sub-goal kind cannot hold without (``forward`` is needed by every environment)
+NEEDS: dict[str, tuple[str, ...]] = {"carrying": ("pickup",), "cleared": ("pickup",), "door_open": ("toggle",),
+                                     "box_open": ("toggle",), "placed_near": ("pickup", "drop")}
+
+
+def _check_actions(env: Any, actions: list[str], kinds: tuple[Kind, ...], gym_id: str, source: str) -> None:
+    """Refuse, in one line, an action set that cannot reach a sub-goal or the environment's success: no
+    ``forward``; a kind's action (``NEEDS``) missing; or ``done`` missing where the environment's own
+    ``step`` rewards it (MiniGrid's GoToDoor and GoToObject end an episode on ``done`` in front of the
+    target)."""
+    have = set(actions)
+    missing = [] if "forward" in have else [("forward", "the agent could not move")]
+    for i, k in enumerate(kinds):
+        for a in NEEDS.get(k.kind, ()):
+            if a not in have:
+                missing.append((a, f"subgoals[{i}] ({k.name}) is a {k.kind} sub-goal"))
+    if "done" not in have:
+        try:
+            own = inspect.getsource(type(env).step) if "step" in vars(type(env)) else ""
+        except (OSError, TypeError):        # no source to read (a compiled or dynamically built class)
+            own = ""
+        if "actions.done" in own:
+            missing.append(("done", f"{gym_id} rewards the done action"))
+    if missing:
+        action, why = missing[0]
+        raise SpecError(f"{source}: options.actions: {action!r} is missing and {why}; add {action} to "
+                        f"options.actions (now {actions})")
+
 
 class RegisteredEnv(gym.Env):
     """A registered MiniGrid environment with a catalogue's sub-goals (see the module docstring).
@@ -197,6 +226,7 @@ class RegisteredEnv(gym.Env):
             compile_kind(i, sg, source) for i, sg in enumerate(marks))
         self._mark_cols = np.array([[sg.name for sg in marks].index(n) for n in self.subgoal_names], np.int64)
         _probe(opts.gym_id, source, {"max_steps": steps} if steps else {}, self._kinds)
+        _check_actions(self.inner, opts.actions, self._kinds, opts.gym_id, source)
         self._action_map = tuple(Actions[a] for a in opts.actions)
         self.action_names = list(opts.actions)
         self.action_space = spaces.Discrete(len(self._action_map))
