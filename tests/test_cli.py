@@ -163,8 +163,17 @@ def test_a_user_maze_without_a_spec_asks_for_one_and_trains_with_one(capsys, tmp
     out = tmp_path / "run"
     assert main(["train", str(tmp_path / "hall.yaml"), "--out", str(out), "--steps", "100", "--no-progress"]) == 2
     line = _one_error_line(capsys)
-    assert "task 'hall' has no built-in critic spec hall-specific" in line and "--model my_spec.yaml" in line
+    assert "task 'hall' has no built-in critic spec hall-specific" in line and "--graph independent" in line
     assert not out.exists()
+    edgeless = tmp_path / "edgeless"        # a graph that takes no edges needs no spec
+    assert main(["train", str(tmp_path / "hall.yaml"), "--graph", "independent", "--out", str(edgeless),
+                 "--steps", "200", "--no-progress", *TINY]) == 0
+    assert "no --model: graph independent over the catalogue's 3 sub-goals" in capsys.readouterr().err
+    cfg = yaml.safe_load((edgeless / "config.yaml").read_text())
+    assert cfg["model"] == "hall-independent" and cfg["model_spec"]["graph"] == "independent"
+    assert cfg["model_spec"]["subgoals"] == ["key", "door", "goal"] and cfg["model_spec"]["edges"] == []
+    assert main(["train", str(tmp_path / "hall.yaml"), "--graph", "independent", "--out", str(edgeless),
+                 "--steps", "800", "--resume", "--no-progress", *TINY]) == 0
     (tmp_path / "hall-spec.yaml").write_text(yaml.safe_dump({
         "name": "hall-spec", "task": "hall", "subgoals": ["key", "door", "goal"], "graph": "specific",
         "edges": [["key", "door", "positive"], ["door", "goal", "positive"]],

@@ -108,21 +108,29 @@ def resolve_run(cfg: RunConfig) -> ResolvedRun:
         raise RunError(f"--graph {cfg.graph} sets the critic's graph, and agent {cfg.agent!r} has no critic; "
                        "drop --graph, or train --agent hubsgo")
     if cfg.agent == "hubsgo" or cfg.model is not None:
-        from ..specs import SpecError, list_model_specs, load_model_spec, match_subgoals
+        from ..specs import ModelSpec, SpecError, list_model_specs, load_model_spec, match_subgoals
 
         model = cfg.model or f"{info.name}-specific"
         missing = cfg.model is None and model not in list_model_specs()
         inherited = None
         if missing and cfg.init_from is not None:
             inherited = _source_spec(cfg.init_from)     # a user's maze started from another run: that run's spec
-        if missing and inherited is None:
+        edgeless = missing and inherited is None and cfg.graph in ("independent", "fully_connected")
+        if missing and inherited is None and not edgeless:
             raise SpecError(f"task {info.name!r} has no built-in critic spec {model}: write one (its sub-goals, "
                             "your signed edges, the prior and the likelihood; models/keydoor-specific.yaml is an "
-                            "example) and pass it with --model my_spec.yaml")
+                            "example) and pass it with --model my_spec.yaml, or train with --graph independent, "
+                            "which needs no edges")
         if inherited is not None:
             spec = inherited if cfg.graph is None else inherited.model_copy(update={"graph": cfg.graph})
             model = spec.name
             print(f"hubsgo: note: no --model: the critic spec of the --init-from run, {spec.name!r}", file=sys.stderr)
+        elif edgeless:      # a graph that takes no human edges: the default prior and likelihood over the catalogue
+            spec = ModelSpec(name=f"{info.name}-{cfg.graph}", task=info.name, subgoals=list(names), graph=cfg.graph)
+            model = spec.name
+            print(f"hubsgo: note: no --model: graph {cfg.graph} over the catalogue's {len(names)} sub-goals, with "
+                  "the default prior and likelihood; a spec with your signed edges (--model) adds what you know",
+                  file=sys.stderr)
         else:
             spec = load_model_spec(model, graph=cfg.graph)
         source = f"model spec {model!r} for task {info.name!r}"
@@ -134,7 +142,7 @@ def resolve_run(cfg: RunConfig) -> ResolvedRun:
             resolved["subgoals"] = list(spec.subgoals)
         resolved["model_spec"] = spec.model_dump(mode="json")
         resolved["model"] = spec.name
-        if cfg.model is None and inherited is None and is_catalogue(cfg.task):
+        if cfg.model is None and inherited is None and not edgeless and is_catalogue(cfg.task):
             print(f"hubsgo: note: no --model: the built-in spec {model!r}, named after the catalogue's task "
                   f"{info.name!r}; pass --model to use your own", file=sys.stderr)
         if spec.task is not None and spec.task != info.name:     # it fits (above); say whose it was
