@@ -63,7 +63,10 @@ FAMILIES: dict[str, FamilyDefaults] = {
         # 90-115 steps where the scripted one takes at most 45 (docs/results.md, "robosuite arm tasks")
         other_low_loop={"option_steps": 120},
         sb3={"td3": {"learning_rate": 1e-3, "buffer_size": 100_000, "learning_starts": 1000, "batch_size": 256,
-                     "train_freq": 1, "gamma": 0.99, "noise_sigma": 0.1, "policy_kwargs": {"net_arch": [256, 256]}}}),
+                     "train_freq": 1, "gamma": 0.99, "noise_sigma": 0.1, "policy_kwargs": {"net_arch": [256, 256]}},
+             # SB3's own PPO defaults for continuous control, with the arms' 256x256 networks
+             "ppo": {"learning_rate": 3e-4, "n_steps": 2048, "batch_size": 64, "n_epochs": 10, "gamma": 0.99,
+                     "ent_coef": 0.0, "policy_kwargs": {"net_arch": [256, 256]}}}),
 }
 
 # Any Gymnasium env with discrete actions (envs/gym_task.py): the mazes' loop, high level and flat
