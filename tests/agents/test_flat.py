@@ -203,11 +203,12 @@ def test_td3_trains_on_an_arm_task(tmp_path):
 
 @pytest.mark.mujoco
 def test_ppo_trains_on_an_arm_task_with_the_family_s_own_settings(tmp_path):
+    from hubsgo_ppl.experiments.checkpoint import run_config
+
     out = tmp_path / "ppo"
     summary = train(RunConfig(task="push_any_one", agent="ppo", steps=1, seed=0,
                               overrides=["ppo.n_steps=128", "ppo.policy_kwargs.net_arch=[32]"]), out, progress=False)
     rows = read_csv_rows(out / "metrics.csv")
     assert summary["finished"] and rows and float(rows[0]["return"]) == float(rows[0]["success"])
-    cfg = load_run(out)[0]
-    hyper = cfg["hyper"]["ppo"] if isinstance(cfg, dict) else cfg.hyper["ppo"]
+    hyper = run_config(out)["hyper"]["ppo"]
     assert hyper["n_epochs"] == 10 and hyper["n_steps"] == 128      # the family's preset, --set over it

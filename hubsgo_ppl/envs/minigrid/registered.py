@@ -167,22 +167,18 @@ def _check_actions(env: Any, actions: list[str], kinds: tuple[Kind, ...], gym_id
     ``step`` rewards it (MiniGrid's GoToDoor and GoToObject end an episode on ``done`` in front of the
     target)."""
     have = set(actions)
-    missing = [] if "forward" in have else [("forward", "the agent could not move")]
-    for i, k in enumerate(kinds):
-        for a in NEEDS.get(k.kind, ()):
-            if a not in have:
-                missing.append((a, f"subgoals[{i}] ({k.name}) is a {k.kind} sub-goal"))
-    if "done" not in have:
+    needed = [("forward", "the agent could not move")] + [
+        (a, f"subgoals[{i}] ({k.name}) is a {k.kind} sub-goal") for i, k in enumerate(kinds) for a in NEEDS.get(k.kind, ())]
+    if "done" not in have and "step" in vars(type(env)):
         try:
-            own = inspect.getsource(type(env).step) if "step" in vars(type(env)) else ""
+            if "actions.done" in inspect.getsource(type(env).step):
+                needed.append(("done", f"{gym_id} rewards the done action"))
         except (OSError, TypeError):        # no source to read (a compiled or dynamically built class)
-            own = ""
-        if "actions.done" in own:
-            missing.append(("done", f"{gym_id} rewards the done action"))
-    if missing:
-        action, why = missing[0]
-        raise SpecError(f"{source}: options.actions: {action!r} is missing and {why}; add {action} to "
-                        f"options.actions (now {actions})")
+            pass
+    for action, why in needed:
+        if action not in have:
+            raise SpecError(f"{source}: options.actions: {action!r} is missing and {why}; add {action} to "
+                            f"options.actions (now {actions})")
 
 
 class RegisteredEnv(gym.Env):
