@@ -30,7 +30,7 @@ import torch
 
 from ..infer.tdbatch import TDBatch
 from .buffers import ReplayBuffer
-from .nets import TargetNetwork, forward, mlp
+from .nets import TargetNetwork, backward, forward, forward_saved, mlp
 from .settings import HighLevelConfig
 
 __all__ = ["HighLevelConfig", "HighLevelBatch", "HighLevelDQN", "masked_max"]
@@ -111,9 +111,22 @@ class HighLevelDQN:
             else:
                 boot = masked_max(q_next_t, mask)
             y = b["reward"] + b["discount"] * boot
-        q_taken = forward(self.q, b["obs"]).gather(1, b["goal"][:, None]).squeeze(1)
-        loss = 0.5 * (y - q_taken).pow(2).mean()            # Eq. 2
-        self.net.step(loss)
+        index = b["goal"][:, None]
+        saved = forward_saved(self.q, b["obs"])
+        if saved is None:                   # a network backward() does not cover: autograd
+            q_taken = forward(self.q, b["obs"]).gather(1, index).squeeze(1)
+            loss = 0.5 * (y - q_taken).pow(2).mean()            # Eq. 2
+            self.net.step(loss)
+        else:
+            with torch.no_grad():           # the same loss, and its gradient as autograd computes it
+                out, inputs = saved
+                q_taken = out.gather(1, index).squeeze(1)
+                diff = y - q_taken
+                loss = 0.5 * diff.pow(2).mean()                 # Eq. 2
+                grad = (torch.ones_like(loss) * 0.5).expand_as(diff) / diff.numel()     # d loss / d diff^2
+                grad = -(grad * (2.0 * diff.pow(1.0)))                                     # ... / d q_taken
+                grad_q = torch.zeros_like(out).scatter_add_(1, index, grad.unsqueeze(1))
+                self.net.apply(backward(self.q, inputs, grad_q))
         self.updates += 1
         batch = HighLevelBatch(q_taken=q_taken.detach(), q_next=q_next_t, reward=b["reward"],
                                discount=b["discount"], available=avail)

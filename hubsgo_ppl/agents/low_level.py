@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 from .buffers import ReplayBuffer
-from .nets import TargetNetwork, forward, mlp
+from .nets import TargetNetwork, backward, forward, forward_saved, mlp
 from .protocols import Controller, LowLevel, LowLevelBase
 from .settings import GoalDQNConfig
 
@@ -92,13 +92,26 @@ class GoalDQN(LowLevelBase):
         with torch.no_grad():
             q_next = self._q(self.q_target, b["next_obs"]).max(-1).values  # (B, N)
             y = reward + self.cfg.gamma * (~done).float() * q_next
-        q = self._q(self.q, b["obs"])                                    # (B, N, A)
-        q_a = q.gather(2, b["action"][:, None, None].expand(-1, self.n_goals, 1)).squeeze(2)
         weight = (~before).float()          # a goal already achieved is never the option's target
         if self.goal_weight is not None:
             weight = weight * self.goal_weight
-        loss = (weight * (q_a - y).pow(2)).sum() / weight.sum().clamp_min(1.0)
-        self.net.step(loss)
+        index = b["action"][:, None, None].expand(-1, self.n_goals, 1)
+        saved = forward_saved(self.q, b["obs"])
+        if saved is None:                   # a network backward() does not cover: autograd
+            q_a = self._q(self.q, b["obs"]).gather(2, index).squeeze(2)
+            loss = (weight * (q_a - y).pow(2)).sum() / weight.sum().clamp_min(1.0)
+            self.net.step(loss)
+            return {"low/td_loss": loss.item()}
+        with torch.no_grad():               # the same loss, and its gradient as autograd computes it
+            out, inputs = saved
+            q = out.view(*out.shape[:-1], self.n_goals, self.n_actions)             # (B, N, A)
+            diff = q.gather(2, index).squeeze(2) - y
+            denom = weight.sum().clamp_min(1.0)
+            loss = (weight * diff.pow(2)).sum() / denom
+            grad = (torch.ones_like(loss) / denom).expand_as(weight) * weight        # d loss / d (weight * diff^2)
+            grad = grad * (2.0 * diff.pow(1.0))                                        # ... / d diff
+            grad_q = torch.zeros_like(q).scatter_add_(2, index, grad.unsqueeze(2)).view_as(out)
+            self.net.apply(backward(self.q, inputs, grad_q))
         return {"low/td_loss": loss.item()}
 
     def state_dict(self) -> dict[str, Any]:

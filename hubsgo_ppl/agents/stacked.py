@@ -22,7 +22,7 @@ import torch
 from torch import nn
 
 from .low_level import GoalDQN
-from .nets import TargetNetwork
+from .nets import TargetNetwork, flushing_subnormals
 
 __all__ = ["StackedNets", "StackedGoalDQN"]
 
@@ -102,11 +102,12 @@ class StackedNets:
                 coef = torch.clamp(self.grad_clip / (total + 1e-6), max=1.0)
                 for g in grads:
                     g.mul_(coef.view(-1, *([1] * (g.dim() - 1))))
-            if full:
-                self._adam_full(grads)
-            else:
-                for j, (p, g) in enumerate(zip(self.params, grads)):
-                    self._adam(j, p, g, sel)
+            with flushing_subnormals():     # as TargetNetwork's Adam (agents/nets.py)
+                if full:
+                    self._adam_full(grads)
+                else:
+                    for j, (p, g) in enumerate(zip(self.params, grads)):
+                        self._adam(j, p, g, sel)
             for p, t in zip(self.params, self.targets):     # Polyak (SB3's polyak_update)
                 if full:
                     t.mul_(1 - self.tau)
