@@ -2,13 +2,14 @@
 seed of an agent against another (e.g. HUBS-GO against SB3's DQN), whole processes side by side:
 
     .venv/bin/python benchmarks/lockstep.py --task keydoor --steps 10000 --seeds 0 1 2 3 4 --pairs 3
+    .venv/bin/python benchmarks/lockstep.py --task keydoor --steps 10000 --seeds 0 1 2 3 4 --workers 2 --pairs 3
     .venv/bin/python benchmarks/lockstep.py --task keydoor --steps 20000 --against dqn --pairs 3
 
 Each measurement is one ``hubsgo train`` process (imports, building the run, training, the end-of-run
 files), timed from outside. The two commands of a pair run one after the other, in alternating order
 (A then B, B then A, ...), so that a drift in the machine's speed falls on both; the script prints
 each pair's ratio and the median of the pairs' ratios. ``--seeds`` (default) compares
-``hubsgo train TASK --seeds S0 S1 ...`` with ``hubsgo train TASK --seed S0``; ``--against AGENT``
+``hubsgo train TASK --seeds S0 S1 ... --workers W`` with ``hubsgo train TASK --seed S0``; ``--against AGENT``
 compares ``--seed S0`` of ``--agent`` (default hubsgo) with ``--seed S0`` of AGENT, per env step.
 
 ``--split`` instead trains one seed in this process and prints where its wall time goes (imports,
@@ -90,6 +91,7 @@ def main() -> None:
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
     p.add_argument("--against", metavar="AGENT", help="compare one seed with one seed of this agent instead")
     p.add_argument("--pairs", type=int, default=3)
+    p.add_argument("--workers", type=int, default=1, help="processes sharing the lockstep seeds (hubsgo train --workers)")
     p.add_argument("--split", action="store_true", help="where one seed's wall time goes (in this process)")
     args = p.parse_args()
     if args.split:
@@ -100,7 +102,8 @@ def main() -> None:
         def run(which: str, i: int) -> float:
             s0 = str(args.seeds[0])
             if args.against is None:
-                cmd = ["--agent", args.agent] + (["--seeds", *map(str, args.seeds)] if which == "a" else ["--seed", s0])
+                cmd = ["--agent", args.agent] + (["--seeds", *map(str, args.seeds), "--workers", str(args.workers)]
+                                                 if which == "a" else ["--seed", s0])
             else:
                 cmd = ["--agent", args.agent if which == "a" else args.against, "--seed", s0]
             return timed(base + cmd + ["--out", f"{tmp}/{which}{i}"])
@@ -114,7 +117,8 @@ def main() -> None:
             ratios.append(got["a"] / got["b"])
             print(f"pair {i}: A {got['a']:.1f} s, B {got['b']:.1f} s, A/B {ratios[-1]:.2f}", flush=True)
     if args.against is None:
-        what = f"A = {len(args.seeds)} seeds of {args.agent} in lockstep, B = one seed alone"
+        what = (f"A = {len(args.seeds)} seeds of {args.agent} in lockstep on {args.workers} worker(s), "
+                "B = one seed alone")
     else:
         what = f"A = one seed of {args.agent}, B = one seed of {args.against}"
     print(f"{args.task}, {args.steps} env steps, {what}")

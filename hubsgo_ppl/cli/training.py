@@ -16,6 +16,10 @@ def cmd_train(args: argparse.Namespace) -> int:
 
     if args.seeds is not None:
         return _train_seeds(args)
+    if args.workers != 1:
+        from ..experiments.run import RunError
+
+        raise RunError("--workers shares the seeds of --seeds between processes; one --seed trains in one")
     agent, seed = args.agent or "hubsgo", 0 if args.seed is None else args.seed
     out = Path(args.out) if args.out else Path("runs") / f"{args.task}-{agent}-s{seed}"
     if args.resume:     # flags given that would change the run are refused; the run's own values pass
@@ -55,7 +59,8 @@ def _train_seeds(args: argparse.Namespace) -> int:
                          low_level=args.low_level, overrides=args.set or [])
     cfg = RunConfig(task=args.task, agent=agent, model=args.model, graph=args.graph, steps=args.steps,
                     low_level=args.low_level, overrides=args.set or [], checkpoint_steps=args.checkpoint_steps)
-    summaries = train_seeds(cfg, args.seeds, outs, resume=args.resume, progress=not args.no_progress)
+    summaries = train_seeds(cfg, args.seeds, outs, resume=args.resume, progress=not args.no_progress,
+                            workers=args.workers)
     for summary, out in zip(summaries, outs):
         print_summary(summary, out)
     return 0

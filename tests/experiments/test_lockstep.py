@@ -92,3 +92,28 @@ def test_the_cli_trains_seeds_into_out_seedk_and_refuses_mixed_flags(tmp_path, c
     assert "lists a seed twice" in capsys.readouterr().err
     assert main(["train", "keydoor", "--seeds", "3", "4", "--stop-at", "100", "--out", str(tmp_path / "z")]) == 2
     assert "--stop-at applies to one run" in capsys.readouterr().err
+
+
+def test_shares_split_the_seeds_into_consecutive_runs_one_per_worker():
+    from hubsgo_ppl.experiments.lockstep import shares
+
+    assert [list(r) for r in shares(5, 2)] == [[0, 1, 2], [3, 4]]
+    assert [list(r) for r in shares(5, 3)] == [[0, 1], [2], [3, 4]]
+    assert [list(r) for r in shares(2, 8)] == [[0], [1]]
+    assert [list(r) for r in shares(3, 1)] == [[0, 1, 2]]
+
+
+def test_seeds_shared_between_worker_processes_give_each_seeds_own_files(lockstep, tmp_path, capsys):
+    out, _ = lockstep
+    sets = [x for kv in TINY for x in ("--set", kv)]
+    args = ["train", "keydoor", "--seeds", "0", "1", "--steps", "450", "--checkpoint-steps", "150",
+            "--workers", "2", "--out", str(tmp_path / "w"), "--no-progress", *sets]
+    assert main(args) == 0
+    for seed in (0, 1):
+        assert _rows(tmp_path / "w" / f"seed{seed}") == _rows(out / f"seed{seed}")
+    capsys.readouterr()
+    assert main(args) == 2          # a worker's refusal comes back as the command's one line
+    err = capsys.readouterr().err
+    assert err.count("already holds a run") == 2 and "Traceback" not in err
+    assert main(["train", "keydoor", "--seed", "0", "--workers", "2", "--out", str(tmp_path / "v")]) == 2
+    assert "--workers shares the seeds of --seeds" in capsys.readouterr().err
