@@ -50,12 +50,21 @@ class ReplayBuffer:
         return out
 
     def state_dict(self) -> dict[str, Any]:
-        return {"data": {k: v[: self.capacity].copy() for k, v in self.data.items()},
-                "pos": self.pos, "size": self.size}
+        """The rows written so far (all of them once the ring is full), where it writes next, how many
+        it holds and its capacity: a checkpoint early in a run does not carry the empty rest. (At least
+        one row: an empty array pickles through ``bytes()``, which the safe loader refuses.)"""
+        rows = max(self.size, 1)
+        return {"data": {k: v[:rows].copy() for k, v in self.data.items()},
+                "pos": self.pos, "size": self.size, "capacity": self.capacity}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Load :meth:`state_dict`'s state (or a full-capacity one, as earlier checkpoints hold)."""
+        capacity = int(state.get("capacity", self.capacity))
+        size = int(state["size"])
         for k, v in state["data"].items():
-            if k not in self.data or self.data[k].shape != v.shape:
+            if (k not in self.data or capacity != self.capacity or self.data[k].shape[1:] != v.shape[1:]
+                    or not size <= len(v) <= self.capacity):
                 raise ValueError(f"replay field {k!r} does not match this buffer's layout")
-            self.data[k][...] = v
-        self.pos, self.size = int(state["pos"]), int(state["size"])
+            self.data[k][: len(v)] = v
+            self.data[k][len(v):] = 0
+        self.pos, self.size = int(state["pos"]), size

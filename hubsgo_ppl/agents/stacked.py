@@ -43,8 +43,41 @@ def stacked_forward(params: Sequence[torch.Tensor], x: torch.Tensor) -> torch.Te
     return x
 
 
+def stacked_forward_saved(params: Sequence[torch.Tensor], x: torch.Tensor) -> tuple[torch.Tensor, list[torch.Tensor]]:
+    """:func:`stacked_forward` and the input of each layer, which :func:`stacked_backward` needs."""
+    n = len(params) // 2
+    inputs = []
+    for i in range(n):
+        w, b = params[2 * i], params[2 * i + 1]
+        inputs.append(x)
+        x = torch.baddbmm(b.unsqueeze(1), x, w.transpose(1, 2))
+        if i < n - 1:
+            x = torch.relu(x)
+    return x, inputs
+
+
+def stacked_backward(params: Sequence[torch.Tensor], inputs: list[torch.Tensor], grad: torch.Tensor) -> list[torch.Tensor]:
+    """The gradient of every parameter of :func:`stacked_forward` given the loss's gradient at its output,
+    with the operations autograd runs for ``baddbmm`` and ``relu`` (nets.backward does the same for one
+    seed), each weight's gradient contiguous as autograd leaves it."""
+    n = len(params) // 2
+    grads: list[torch.Tensor] = []
+    for i in range(n - 1, -1, -1):
+        w, x = params[2 * i], inputs[i]
+        g_w = x.transpose(1, 2).bmm(grad).transpose(1, 2).contiguous()    # baddbmm's batch2 gradient, transposed back
+        g_b = grad.sum([1], keepdim=True).squeeze(1)                        # the engine's sum_to of the broadcast bias
+        grads += [g_b, g_w]
+        if i > 0:
+            grad = torch.ops.aten.threshold_backward(grad.bmm(w), x, 0)   # baddbmm's batch1 gradient, then ReLU's
+    return grads[::-1]
+
+
 class StackedNets:
-    """The online networks, target networks and Adam states of several :class:`TargetNetwork` s."""
+    """The online networks, target networks and Adam states of several :class:`TargetNetwork` s.
+
+    Each of the four is one buffer ``(S, P)`` (seeds x every parameter's numbers, layer after layer):
+    a layer's stacked weights are views ``(S, out, in)`` of its columns, and each seed's own parameters
+    and Adam state are views of its row, so that Adam and Polyak run as one operation per buffer."""
 
     def __init__(self, nets: Sequence[TargetNetwork]):
         self.nets = list(nets)
@@ -58,17 +91,31 @@ class StackedNets:
         self.tau, self.grad_clip = nets[0].tau, nets[0].grad_clip
         online = [[p for m in _linears(n.online) for p in (m.weight, m.bias)] for n in nets]
         target = [[p for m in _linears(n.target) for p in (m.weight, m.bias)] for n in nets]
-        self.params = [torch.stack([ps[j].detach() for ps in online]).contiguous() for j in range(len(online[0]))]
-        self.targets = [torch.stack([ps[j].detach() for ps in target]).contiguous() for j in range(len(target[0]))]
-        self.exp_avg = [torch.zeros_like(p) for p in self.params]
-        self.exp_avg_sq = [torch.zeros_like(p) for p in self.params]
-        self.steps = torch.zeros(len(self.params), len(nets))     # Adam's step count of each parameter, seed
+        S = len(nets)
+        self.shapes = [tuple(p.shape) for p in online[0]]
+        sizes = [p.numel() for p in online[0]]
+        self.offsets = [sum(sizes[:j]) for j in range(len(sizes) + 1)]
+
+        def buffer(rows: list[list[torch.Tensor]]) -> torch.Tensor:
+            return torch.stack([torch.cat([t.detach().reshape(-1) for t in row]) for row in rows])
+
+        def views(flat: torch.Tensor) -> list[torch.Tensor]:
+            return [flat[:, a:b].view(S, *shape) for a, b, shape in zip(self.offsets, self.offsets[1:], self.shapes)]
+
+        zeros = [[torch.zeros_like(p) for p in row] for row in online]
+        self.flat = buffer(online)
+        self.flat_target = buffer(target)
+        self.flat_m = buffer([[net.opt.state[p]["exp_avg"] if net.opt.state.get(p) else z for p, z in zip(row, zr)]
+                              for net, row, zr in zip(nets, online, zeros)])
+        self.flat_v = buffer([[net.opt.state[p]["exp_avg_sq"] if net.opt.state.get(p) else z for p, z in zip(row, zr)]
+                              for net, row, zr in zip(nets, online, zeros)])
+        self.params, self.targets = views(self.flat), views(self.flat_target)
+        self.exp_avg, self.exp_avg_sq = views(self.flat_m), views(self.flat_v)
+        self.steps = torch.zeros(len(self.params), S)     # Adam's step count of each parameter, seed
         for k, net in enumerate(nets):
             for j, p in enumerate(online[k]):
                 st = net.opt.state.get(p)
                 if st:
-                    self.exp_avg[j][k] = st["exp_avg"]
-                    self.exp_avg_sq[j][k] = st["exp_avg_sq"]
                     self.steps[j, k] = float(st["step"])
         for k, net in enumerate(nets):      # each seed's modules and Adam state: views of its slice
             for j, p in enumerate(online[k]):
@@ -84,73 +131,45 @@ class StackedNets:
         """(S, B, out) online values of every seed, ``obs`` (S, B, in)."""
         return stacked_forward(self.params, obs)
 
-    def step(self, idx: list[int], loss_fn) -> torch.Tensor:
-        """One gradient step of the seeds ``idx`` on ``loss_fn(online params, target params)`` -> (s,)
-        per-seed losses; their Adam steps and Polyak updates. Returns the per-seed losses."""
+    @torch.no_grad()
+    def apply(self, idx: list[int], grads: list[torch.Tensor]) -> None:
+        """Clipping, Adam and Polyak for the seeds ``idx`` given their gradients, one (s, ...) tensor per
+        parameter (contiguous, as autograd leaves them)."""
         full = idx == list(range(len(self.nets)))
         sel = slice(None) if full else torch.as_tensor(idx)
-        leaves = [(p if full else p[sel]).detach().requires_grad_() for p in self.params]
-        with torch.no_grad():
-            targets = self.targets if full else [t[sel] for t in self.targets]
-        losses = loss_fn(leaves, targets)
-        losses.sum().backward()
-        grads = [p.grad for p in leaves]
-        with torch.no_grad():
-            if self.grad_clip is not None:      # torch.nn.utils.clip_grad_norm_, per seed
-                norms = torch.stack([torch.linalg.vector_norm(g.flatten(1), dim=1) for g in grads], dim=1)
-                total = torch.linalg.vector_norm(norms, dim=1)
-                coef = torch.clamp(self.grad_clip / (total + 1e-6), max=1.0)
-                for g in grads:
-                    g.mul_(coef.view(-1, *([1] * (g.dim() - 1))))
-            with flushing_subnormals():     # as TargetNetwork's Adam (agents/nets.py)
-                if full:
-                    self._adam_full(grads)
-                else:
-                    for j, (p, g) in enumerate(zip(self.params, grads)):
-                        self._adam(j, p, g, sel)
-            for p, t in zip(self.params, self.targets):     # Polyak (SB3's polyak_update)
-                if full:
-                    t.mul_(1 - self.tau)
-                    torch.add(t, p, alpha=self.tau, out=t)
-                else:
-                    t[sel] = t[sel].mul_(1 - self.tau).add_(p[sel], alpha=self.tau)
-        return losses.detach()
+        s = len(idx)
+        if self.grad_clip is not None:      # torch.nn.utils.clip_grad_norm_, per seed
+            norms = torch.stack([torch.linalg.vector_norm(g.flatten(1), dim=1) for g in grads], dim=1)
+            total = torch.linalg.vector_norm(norms, dim=1)
+            coef = torch.clamp(self.grad_clip / (total + 1e-6), max=1.0)
+        g = torch.cat([x.reshape(s, -1) for x in grads], dim=1)
+        if self.grad_clip is not None:
+            g.mul_(coef.view(-1, 1))
+        with flushing_subnormals():         # as TargetNetwork's Adam (agents/nets.py)
+            if full:
+                self._adam(g, self.flat, self.flat_m, self.flat_v, self.steps)
+                self.flat_target.mul_(1 - self.tau)      # Polyak (SB3's polyak_update)
+                torch.add(self.flat_target, self.flat, alpha=self.tau, out=self.flat_target)
+            else:
+                p, m, v, steps = self.flat[sel], self.flat_m[sel], self.flat_v[sel], self.steps[:, sel]
+                self._adam(g, p, m, v, steps)
+                self.flat[sel], self.flat_m[sel], self.flat_v[sel], self.steps[:, sel] = p, m, v, steps
+                self.flat_target[sel] = self.flat_target[sel].mul_(1 - self.tau).add_(p, alpha=self.tau)
 
-    def _corrections(self, steps: torch.Tensor, like: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Adam's -step size and sqrt of the second bias correction per seed, shaped to broadcast on ``like``."""
+    def _adam(self, g: torch.Tensor, p: torch.Tensor, m: torch.Tensor, v: torch.Tensor, steps: torch.Tensor) -> None:
+        """torch.optim.Adam's single-tensor step, in place, of the seeds' rows ``p`` (s, P) with their
+        moments and step counts (parameters, s)."""
+        steps += 1
         n = steps.double().numpy()
-        shape = (-1, *([1] * (like.dim() - 1)))
-        step_size = torch.as_tensor(-(self.lr / (1 - self.beta1 ** n)), dtype=like.dtype).view(shape)
-        bc2_sqrt = torch.as_tensor(np.sqrt(1 - self.beta2 ** n), dtype=like.dtype).view(shape)
-        return step_size, bc2_sqrt
-
-    def _adam_full(self, grads: list[torch.Tensor]) -> None:
-        """torch.optim.Adam's single-tensor step of every seed, every parameter."""
-        self.steps += 1
-        m, v = self.exp_avg, self.exp_avg_sq
-        torch._foreach_lerp_(m, grads, 1 - self.beta1)
-        torch._foreach_mul_(v, self.beta2)
-        torch._foreach_addcmul_(v, grads, grads, 1 - self.beta2)
-        corr = [self._corrections(self.steps[j], p) for j, p in enumerate(self.params)]
-        denom = torch._foreach_sqrt(v)
-        torch._foreach_div_(denom, [c[1] for c in corr])
-        torch._foreach_add_(denom, self.eps)
-        update = torch._foreach_mul(m, [c[0] for c in corr])
-        torch._foreach_div_(update, denom)
-        torch._foreach_add_(self.params, update)
-
-    def _adam(self, j: int, p: torch.Tensor, g: torch.Tensor, sel) -> None:
-        """torch.optim.Adam's single-tensor step of parameter j for the seeds ``sel``."""
-        steps = self.steps[j, sel] + 1
-        self.steps[j, sel] = steps
-        m, v = self.exp_avg[j][sel], self.exp_avg_sq[j][sel]
+        if not (n == n[:1]).all():      # a parameter whose step count differs from its seed's others
+            raise RuntimeError("a seed's parameters have taken different numbers of Adam steps")
+        n = n[0]
+        step_size = torch.as_tensor(-(self.lr / (1 - self.beta1 ** n)), dtype=p.dtype).view(-1, 1)
+        bc2_sqrt = torch.as_tensor(np.sqrt(1 - self.beta2 ** n), dtype=p.dtype).view(-1, 1)
         m.lerp_(g, 1 - self.beta1)
         v.mul_(self.beta2).addcmul_(g, g, value=1 - self.beta2)
-        step_size, bc2_sqrt = self._corrections(steps, p)
         denom = (v.sqrt() / bc2_sqrt).add_(self.eps)
-        p[sel] = p[sel] + (m * step_size) / denom
-        self.exp_avg[j][sel] = m
-        self.exp_avg_sq[j][sel] = v
+        p.add_((m * step_size) / denom)
 
 
 class StackedGoalDQN:
@@ -191,14 +210,21 @@ class StackedGoalDQN:
             gw = torch.stack([torch.ones(N) if lw.goal_weight is None else lw.goal_weight for lw in lows])
             weight = weight * gw[:, None, :]
         s, B = len(lows), before.shape[1]
-
-        def loss_fn(online, target):
-            with torch.no_grad():
-                q_next = stacked_forward(target, b["next_obs"]).view(s, B, N, A).max(-1).values
-                y = reward + cfg.gamma * (~done).float() * q_next
-            q = stacked_forward(online, b["obs"]).view(s, B, N, A)
-            q_a = q.gather(3, b["action"][..., None, None].expand(-1, -1, N, 1)).squeeze(3)
-            return (weight * (q_a - y).pow(2)).sum((1, 2)) / weight.sum((1, 2)).clamp_min(1.0)
-
-        losses = self.nets.step(idx, loss_fn).tolist()
-        return [{"low/td_loss": x} for x in losses]
+        nets = self.nets
+        full = idx == list(range(len(self.lows)))
+        online = nets.params if full else [p[torch.as_tensor(idx)] for p in nets.params]
+        target = nets.targets if full else [t[torch.as_tensor(idx)] for t in nets.targets]
+        with torch.no_grad():               # the loss, and its gradient as autograd computes it
+            q_next = stacked_forward(target, b["next_obs"]).view(s, B, N, A).max(-1).values
+            y = reward + cfg.gamma * (~done).float() * q_next
+            out, inputs = stacked_forward_saved(online, b["obs"])
+            q = out.view(s, B, N, A)
+            index = b["action"][..., None, None].expand(-1, -1, N, 1)
+            diff = q.gather(3, index).squeeze(3) - y
+            denom = weight.sum((1, 2)).clamp_min(1.0)
+            losses = (weight * diff.pow(2)).sum((1, 2)) / denom
+            grad = (torch.ones_like(losses) / denom)[:, None, None].expand_as(weight) * weight
+            grad = grad * (2.0 * diff.pow(1.0))
+            grad_q = torch.zeros_like(q).scatter_add_(3, index, grad.unsqueeze(3)).view_as(out)
+            nets.apply(idx, stacked_backward(online, inputs, grad_q))
+        return [{"low/td_loss": x} for x in losses.tolist()]

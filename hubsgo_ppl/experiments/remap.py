@@ -130,10 +130,20 @@ def _remap_columns(arr: np.ndarray, index: Sequence[int | None], fill: bool) -> 
     return out
 
 
+def _full(buf: dict[str, Any]) -> dict[str, Any]:
+    """A copy of a replay buffer's state with every field at its full capacity (rows past ``size`` zero)."""
+    capacity = int(buf.get("capacity", len(next(iter(buf["data"].values())))))
+    data = {}
+    for k, v in buf["data"].items():
+        data[k] = np.zeros((capacity, *v.shape[1:]), dtype=v.dtype)
+        data[k][: len(v)] = v
+    return {**copy.deepcopy({k: v for k, v in buf.items() if k != "data"}), "data": data, "capacity": capacity}
+
+
 def _chronological(buf: dict[str, Any]) -> np.ndarray:
     """Row positions of a ring buffer's contents, oldest first."""
     size, pos = int(buf["size"]), int(buf["pos"])
-    capacity = len(next(iter(buf["data"].values())))
+    capacity = int(buf.get("capacity", len(next(iter(buf["data"].values())))))
     if size < capacity:
         return np.arange(size)
     return np.concatenate([np.arange(pos, capacity), np.arange(pos)])
@@ -214,7 +224,7 @@ def remap_high_state(old: dict[str, Any], fresh: dict[str, Any], fresh_params: S
         return out
     out["opt"] = _remap_adam(old["opt"], fresh_params, index, 1)
     out["updates"] = int(old["updates"])
-    buf, new_buf = old["buffer"], copy.deepcopy(fresh["buffer"])
+    buf, new_buf = old["buffer"], _full(fresh["buffer"])
     goal_map = {i: j for j, i in enumerate(index) if i is not None}
     rows = _chronological(buf)
     kept = np.array([int(g) in goal_map for g in buf["data"]["goal"][rows]], dtype=bool)
@@ -224,7 +234,7 @@ def remap_high_state(old: dict[str, Any], fresh: dict[str, Any], fresh_params: S
         sel = rows[kept]
         positions = np.arange(len(sel))
         size = len(sel)
-        pos = size % len(new_buf["data"]["goal"])
+        pos = size % new_buf["capacity"]
     for k, arr in buf["data"].items():
         if k == "available":
             vals = _remap_columns(arr[sel], index, False)

@@ -63,3 +63,29 @@ def test_bad_use_fails_clearly():
         ReplayBuffer(0, np.random.default_rng(0), obs=(1,))
     with pytest.raises(KeyError, match=r"missing fields \['flag'\]"):
         _buffer().add(obs=[0, 0], action=1)
+
+
+def test_the_state_holds_only_the_rows_written_and_loads_full_capacity_states_too():
+    buf = _buffer(capacity=10)
+    assert len(buf.state_dict()["data"]["obs"]) == 1            # empty: one zero row (see state_dict)
+    for i in range(4):
+        buf.add(obs=[i, i], action=i, flag=True)
+    state = buf.state_dict()
+    assert {k: len(v) for k, v in state["data"].items()} == {"obs": 4, "action": 4, "flag": 4}
+    assert (state["capacity"], state["size"], state["pos"]) == (10, 4, 4)
+    old_style = {"data": {k: v.copy() for k, v in buf.data.items()}, "pos": 4, "size": 4}    # full capacity
+    for s in (state, old_style):
+        other = _buffer(capacity=10)
+        other.add(obs=[9, 9], action=9, flag=False)             # rows past the loaded ones are cleared
+        other.add(obs=[9, 9], action=9, flag=False)
+        other.add(obs=[9, 9], action=9, flag=False)
+        other.add(obs=[9, 9], action=9, flag=False)
+        other.add(obs=[9, 9], action=9, flag=False)
+        other.load_state_dict(s)
+        for k in buf.data:
+            assert np.array_equal(other.data[k], buf.data[k]), k
+        assert (other.pos, other.size) == (4, 4)
+    with pytest.raises(ValueError, match="does not match"):
+        _buffer(capacity=12).load_state_dict(state)             # another capacity
+    with pytest.raises(ValueError, match="does not match"):
+        _buffer(capacity=10).load_state_dict({**state, "size": 5})    # fewer rows than it claims to hold
