@@ -68,11 +68,25 @@ def test_compiled_steps_equal_eager_steps(prior, prior_params, likelihood, lik_p
 
 def test_a_new_batch_shape_compiles_again_and_stays_exact():
     eager, compiled = pair({})
+    compiled._compiled_elbo.compile_after = 1       # every shape compiled at once
     for step, (b, masked) in enumerate([(16, True), (16, True), (40, True), (16, False), (40, True), (16, True)]):
         tb = batch(step, b=b, masked=masked)
         assert eager.update(tb) == compiled.update(tb)
     assert_same_state(eager, compiled)
     assert len(compiled._compiled_elbo._compiled) == 3          # (16, mask), (40, mask), (16, no mask)
+
+
+def test_a_shape_seen_a_few_times_runs_eagerly_and_one_seen_often_is_compiled_once():
+    """A growing evidence window meets most of its shapes a few times: those run eagerly; a shape is
+    compiled on its compile_after-th step. Either way the steps are the eager critic's, to the bit."""
+    eager, compiled = pair({})
+    after = compiled._compiled_elbo.compile_after
+    shapes = [16] + [40] * 3 + [24] * (after + 2)
+    for step, b in enumerate(shapes):
+        assert eager.update(batch(step, b=b)) == compiled.update(batch(step, b=b)), step
+    assert_same_state(eager, compiled)
+    keys = compiled._compiled_elbo._compiled
+    assert len(keys) == 1 and ((24, 5), torch.float32) in [s[:2] for s in next(iter(keys))[1]]
 
 
 def test_callables_run_eagerly_and_mix_with_compiled_steps():

@@ -66,8 +66,9 @@ def test_compiled_steps_equal_eager_steps():
     eager_state, comp_state = _state(), _state()
     elbo = CompiledTraceGraph_ELBO(comp_toy.model, comp_toy.guide, baseline_sites=("w",),
                                    extras=lambda: (comp_toy.last_mean,))
+    elbo.compile_after = 2
     g = torch.Generator().manual_seed(0)
-    for step in range(4):                                # call 1 eager (creates the baseline), then compiled
+    for step in range(5):                                # call 1 eager (creates the baseline), 2 eager, then compiled
         draw = torch.bernoulli(torch.full((3,), 0.5), generator=g)
         want = _eager_step(eager_state, eager_toy, y, draw)
         got = elbo.step(comp_state, y, draw)
