@@ -13,8 +13,8 @@ __all__ = ["ReplayBuffer"]
 class ReplayBuffer:
     """A ring buffer of named fields, e.g. ``ReplayBuffer(10_000, obs=(8,), action=(), reward=())``.
 
-    ``sample`` draws uniformly with the buffer's own ``np.random.Generator`` and returns float32/int64
-    torch tensors.
+    ``sample`` draws uniformly with the buffer's own ``np.random.Generator`` and returns float32, int64
+    and bool torch tensors (a bool field stays bool).
     """
 
     def __init__(self, capacity: int, rng: np.random.Generator, dtypes: dict[str, Any] | None = None,
@@ -46,7 +46,7 @@ class ReplayBuffer:
         out = {}
         for k, arr in self.data.items():
             t = torch.from_numpy(arr[idx])
-            out[k] = t.long() if np.issubdtype(arr.dtype, np.integer) else t.float()
+            out[k] = t.long() if np.issubdtype(arr.dtype, np.integer) else t if arr.dtype == bool else t.float()
         return out
 
     def state_dict(self) -> dict[str, Any]:

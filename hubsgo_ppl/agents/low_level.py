@@ -83,15 +83,16 @@ class GoalDQN(LowLevelBase):
 
     def update(self) -> dict[str, float]:
         b = self.buffer.sample(self.cfg.batch_size)
-        before, after = b["before"].bool(), b["after"].bool()
+        before, after = b["before"], b["after"]
         reward = (after & ~before).float()                               # (B, N) intrinsic, per goal
-        done = (reward > 0) | b["terminated"].bool()[:, None]
+        done = (reward > 0) | b["terminated"][:, None]
+        going = (~done).float()
         if self.potential is not None:                                   # phi = 0 at the end of an option
-            phi, phi_next = self.potential(b["obs"]), self.potential(b["next_obs"])
-            reward = reward + self.cfg.shaping * (self.cfg.gamma * (~done).float() * phi_next - phi)
+            phi, phi_next = self.potential(torch.cat([b["obs"], b["next_obs"]])).chunk(2)
+            reward = reward + self.cfg.shaping * (self.cfg.gamma * going * phi_next - phi)
         with torch.no_grad():
             q_next = self._q(self.q_target, b["next_obs"]).max(-1).values  # (B, N)
-            y = reward + self.cfg.gamma * (~done).float() * q_next
+            y = reward + self.cfg.gamma * going * q_next
         weight = (~before).float()          # a goal already achieved is never the option's target
         if self.goal_weight is not None:
             weight = weight * self.goal_weight

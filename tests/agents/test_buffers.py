@@ -22,9 +22,9 @@ def test_ring_overwrites_the_oldest_and_samples_only_what_it_holds():
     assert set(batch["action"].tolist()) == {2, 3, 4}
     assert torch.equal(batch["obs"][:, 0], batch["action"].float())
     assert torch.equal(batch["obs"][:, 1], -batch["action"].float())
-    assert torch.equal(batch["flag"], (batch["action"] % 2 == 0).float())
+    assert torch.equal(batch["flag"], batch["action"] % 2 == 0)
     assert (batch["obs"].dtype, batch["action"].dtype, batch["flag"].dtype) == (torch.float32, torch.int64,
-                                                                                 torch.float32)
+                                                                                 torch.bool)
 
 
 def test_sampling_follows_the_buffers_own_generator():
@@ -40,7 +40,7 @@ def test_sampling_follows_the_buffers_own_generator():
 def _as_batch(buf, idx):
     return {"obs": torch.from_numpy(buf.data["obs"][idx]).float(),
             "action": torch.from_numpy(buf.data["action"][idx]).long(),
-            "flag": torch.from_numpy(buf.data["flag"][idx]).float()}
+            "flag": torch.from_numpy(buf.data["flag"][idx])}
 
 
 def test_state_dict_round_trip_and_layout_check():
