@@ -2,15 +2,17 @@
 dimension, acted and updated with batched matrix products (one ``bmm`` per layer for every seed).
 
 :class:`StackedNets` takes the :class:`~.nets.TargetNetwork` of each seed (ReLU MLPs of one shape) and
-moves their online and target weights and their Adam moments into stacked tensors ``(S, ...)``; each
-seed's own modules and optimiser state are then views of its slice, so that the seed's checkpoint,
+moves their online and target weights and their Adam moments into buffers ``(S, P)`` (seeds x every
+parameter's numbers), whose column blocks are the stacked layers ``(S, ...)``; each seed's own modules
+and optimiser state are then views of its row, so that the seed's checkpoint,
 its evaluation episodes and every reader of the run folder see the same numbers as the stacked update
 writes. Adam is elementwise, so one stacked step is, in its arithmetic, each seed's own Adam step;
 gradient clipping is by each seed's own norm. A step can take any subset of the seeds (a seed whose
 budget is spent, or whose updates fall on other env steps after a resume).
 
 :class:`StackedGoalDQN` is the low level's TD loss (``GoalDQN.update``) over the stack: each seed
-samples its own minibatch from its own replay with its own generator.
+samples its own minibatch from its own replay with its own generator, and the gradients are taken by
+hand (:func:`stacked_backward`, autograd's own operations, as ``nets.backward`` for one seed).
 """
 
 from __future__ import annotations

@@ -15,6 +15,9 @@ floats of its own, and Adam, the clipping and the Polyak step are elementwise pe
 per seed, as for a run alone: each folder continues from its own checkpoint, and a seed whose updates
 fall on other env steps than the others' after a resume takes them with the seeds it shares them with.
 
+``workers`` > 1 (``hubsgo train TASK --seeds ... --workers 2``) shares the seeds between spawned
+processes, each training its share (:func:`shares`) in lockstep.
+
 Agents other than the hierarchical ones with a learned grid low level (``hubsgo``, ``hdqn``) run their
 seeds one after another in the process.
 """
