@@ -133,12 +133,16 @@ class StackedNets:
         """(S, B, out) online values of every seed, ``obs`` (S, B, in)."""
         return stacked_forward(self.params, obs)
 
+    def rows(self, idx: list[int]) -> slice | torch.Tensor:
+        """The index of the seeds ``idx`` in the stack: every row as a view, or a subset's rows."""
+        return slice(None) if idx == list(range(len(self.nets))) else torch.as_tensor(idx)
+
     @torch.no_grad()
     def apply(self, idx: list[int], grads: list[torch.Tensor]) -> None:
         """Clipping, Adam and Polyak for the seeds ``idx`` given their gradients, one (s, ...) tensor per
         parameter (contiguous, as autograd leaves them)."""
-        full = idx == list(range(len(self.nets)))
-        sel = slice(None) if full else torch.as_tensor(idx)
+        sel = self.rows(idx)
+        full = isinstance(sel, slice)
         s = len(idx)
         if self.grad_clip is not None:      # torch.nn.utils.clip_grad_norm_, per seed
             norms = torch.stack([torch.linalg.vector_norm(g.flatten(1), dim=1) for g in grads], dim=1)
@@ -200,25 +204,26 @@ class StackedGoalDQN:
         bs = [lw.buffer.sample(lw.cfg.batch_size) for lw in lows]
         b = {key: torch.stack([x[key] for x in bs]) for key in bs[0]}
         cfg, N, A = lows[0].cfg, self.n_goals, self.n_actions
-        before, after = b["before"].bool(), b["after"].bool()
+        before, after = b["before"], b["after"]
         reward = (after & ~before).float()                                      # (s, B, N)
-        done = (reward > 0) | b["terminated"].bool()[..., None]
+        done = (reward > 0) | b["terminated"][..., None]
+        going = (~done).float()
         if lows[0].potential is not None:
             phi = torch.stack([lw.potential(x["obs"]) for lw, x in zip(lows, bs)])
             phi_next = torch.stack([lw.potential(x["next_obs"]) for lw, x in zip(lows, bs)])
-            reward = reward + cfg.shaping * (cfg.gamma * (~done).float() * phi_next - phi)
+            reward = reward + cfg.shaping * (cfg.gamma * going * phi_next - phi)
         weight = (~before).float()
         if any(lw.goal_weight is not None for lw in lows):
             gw = torch.stack([torch.ones(N) if lw.goal_weight is None else lw.goal_weight for lw in lows])
             weight = weight * gw[:, None, :]
         s, B = len(lows), before.shape[1]
         nets = self.nets
-        full = idx == list(range(len(self.lows)))
-        online = nets.params if full else [p[torch.as_tensor(idx)] for p in nets.params]
-        target = nets.targets if full else [t[torch.as_tensor(idx)] for t in nets.targets]
+        sel = nets.rows(idx)
+        online = [p[sel] for p in nets.params]
+        target = [t[sel] for t in nets.targets]
         with torch.no_grad():               # the loss, and its gradient as autograd computes it
             q_next = stacked_forward(target, b["next_obs"]).view(s, B, N, A).max(-1).values
-            y = reward + cfg.gamma * (~done).float() * q_next
+            y = reward + cfg.gamma * going * q_next
             out, inputs = stacked_forward_saved(online, b["obs"])
             q = out.view(s, B, N, A)
             index = b["action"][..., None, None].expand(-1, -1, N, 1)

@@ -128,7 +128,7 @@ def _in_workers(cfg: RunConfig, seeds: list[int], outs: list[Path], resumes: lis
     from multiprocessing.connection import wait
 
     ctx = mp.get_context("spawn")
-    live = []
+    waiting = {}        # the pipe each worker answers on -> (its seeds' indices, the process)
     for i, idx in enumerate(shares(len(seeds), workers)):
         recv, send = ctx.Pipe(duplex=False)
         proc = ctx.Process(target=_share_child, name=f"seeds:{seeds[idx[0]]}",
@@ -136,10 +136,9 @@ def _in_workers(cfg: RunConfig, seeds: list[int], outs: list[Path], resumes: lis
                                  progress and i == 0, send))
         proc.start()
         send.close()
-        live.append((idx, proc, recv))
+        waiting[recv] = (idx, proc)
     summaries: list[dict[str, Any] | None] = [None] * len(seeds)
     errors = []
-    waiting = {recv: (idx, proc) for idx, proc, recv in live}
     while waiting:
         try:
             ready = wait(list(waiting))
