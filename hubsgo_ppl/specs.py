@@ -19,15 +19,12 @@ from typing import Any, ClassVar, TypeVar
 import yaml
 from pydantic import BaseModel, ConfigDict, ValidationError
 
+from .errors import SpecError
 from .validation import KEY_CHARS, VALUE_CHARS, format_validation_error, shorten
 
 __all__ = ["SpecError", "StrictModel", "load_yaml", "validate_spec", "format_validation_error"]
 
 M = TypeVar("M", bound=BaseModel)
-
-
-class SpecError(ValueError):
-    """A spec (model, task catalogue, sweep) is malformed. The message says where and how to fix it."""
 
 
 class StrictModel(BaseModel):

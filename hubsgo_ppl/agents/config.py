@@ -16,9 +16,11 @@ from .presets import FAMILIES, apply_overrides, preset
 from .settings import (DERIVED, ConfigError, choice, GoalDQNConfig, GoalTD3Config, HighLevelConfig, HIGLConfig, HIROConfig, LoopConfig,
                        ScriptedMazeConfig, ScriptedOSCConfig, Settings, integer, sb3_model, validate)
 
-__all__ = ["ConfigError", "section_classes", "make_config", "resolve_hyper", "set_keys",
+__all__ = ["AGENTS", "ConfigError", "section_classes", "make_config", "resolve_hyper", "set_keys",
            "HIERARCHICAL", "SB3_SECTIONS"]
 
+#: every agent ``hubsgo train --agent`` builds (agents/factory.py has a builder for each)
+AGENTS = ("ddqn", "dqn", "hdqn", "higl", "hiro", "hubsgo", "ppo", "td3")
 #: the agents that run the HRL loop (sections loop, high, low)
 HIERARCHICAL = ("hubsgo", "hdqn")
 #: flat baselines -> the preset section holding their Stable-Baselines3 arguments

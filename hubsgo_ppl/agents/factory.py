@@ -21,7 +21,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from .config import HIERARCHICAL, make_config
+from .config import AGENTS, HIERARCHICAL, make_config
 from .filters import CriticFilter, NoFilter
 from .high_level import HighLevelDQN
 from .loop import HRLLoop
@@ -90,8 +90,12 @@ BUILDERS: dict[str, Callable[..., Any] | str] = {
 }
 
 
+if sorted(BUILDERS) != list(AGENTS):     # the names the command line offers (config.AGENTS), each built here
+    raise ImportError(f"agents/factory.py builds {sorted(BUILDERS)}, but agents/config.py names {list(AGENTS)}")
+
+
 def agent_names() -> list[str]:
-    return sorted(BUILDERS)
+    return list(AGENTS)
 
 
 def build_agent(agent: str, env: gym.Env, cfg: dict[str, Any], seed: int, critic: Any = None) -> Any:

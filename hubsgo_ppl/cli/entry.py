@@ -36,11 +36,7 @@ def _command(argv: list[str]) -> str | None:
 
 
 def _run(argv: Sequence[str] | None) -> int:
-    from ..envs import UnknownTaskError
-    from ..experiments.io import CheckpointError
-    from ..experiments.report import ReportError
-    from ..experiments.run import RunError
-    from ..specs import SpecError
+    from ..errors import CheckpointError, ReportError, RunError, SpecError   # an unknown task is a SpecError
 
     parser = build_parser()
     try:
@@ -56,7 +52,7 @@ def _run(argv: Sequence[str] | None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())       # no second error when Python flushes stdout at exit
         return 1
-    except (SpecError, RunError, CheckpointError, ReportError, UnknownTaskError, FloatingPointError) as exc:
+    except (SpecError, RunError, CheckpointError, ReportError, FloatingPointError) as exc:
         msg = str(exc).strip().replace("\n", "; ")
         print(f"hubsgo: error: {msg}", file=sys.stderr)
         return 2

@@ -45,8 +45,8 @@ TRAIN_EPILOG = """progress bar, after each episode:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from ..agents.factory import agent_names
-    from ..experiments.run import CHECKPOINT_STEPS
+    from ..agents.config import AGENTS
+    from ..experiments.resolved import CHECKPOINT_STEPS
 
     p = _Parser(prog="hubsgo", description="HUBS-GO: Bayesian sub-goal optimisation for HRL")
     sub = p.add_subparsers(dest="command", required=True)
@@ -54,7 +54,7 @@ def build_parser() -> argparse.ArgumentParser:
     t = sub.add_parser("train", help="train an agent on a task and write a run directory",
                        formatter_class=argparse.RawDescriptionHelpFormatter, epilog=TRAIN_EPILOG)
     t.add_argument("task", help="task name (see `hubsgo tasks`) or a catalogue .yaml")
-    t.add_argument("--agent", choices=agent_names(), help="the agent to train (default hubsgo)")
+    t.add_argument("--agent", choices=AGENTS, help="the agent to train (default hubsgo)")
     t.add_argument("--model", help="critic spec: a built-in name (e.g. keydoor-specific) or a .yaml path")
     t.add_argument("--graph", choices=["specific", "fully_connected", "independent"],
                    help="override the spec's graph preset")

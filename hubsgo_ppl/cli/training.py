@@ -12,10 +12,10 @@ __all__ = ["cmd_train", "cmd_revise"]
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    from ..experiments.run import RunConfig, check_resume, train
-
     if args.seeds is not None:
         return _train_seeds(args)
+    from ..experiments.run import RunConfig, check_resume, train
+
     if args.workers != 1:
         from ..experiments.run import RunError
 
@@ -41,8 +41,8 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 def _train_seeds(args: argparse.Namespace) -> int:
     """``hubsgo train TASK --seeds ...``: the seeds in lockstep, each in its own run folder."""
-    from ..experiments.lockstep import seed_folders, train_seeds
-    from ..experiments.run import RunConfig, RunError, check_resume
+    from ..experiments.resolved import RunConfig, RunError
+    from ..experiments.seeds import seed_folders, train_seeds
 
     agent = args.agent or "hubsgo"
     if args.seed is not None:
@@ -54,6 +54,8 @@ def _train_seeds(args: argparse.Namespace) -> int:
     outs = (seed_folders(Path(args.out), args.seeds) if args.out
             else [Path("runs") / f"{args.task}-{agent}-s{seed}" for seed in args.seeds])
     if args.resume:
+        from ..experiments.restore import check_resume
+
         for seed, out in zip(args.seeds, outs):
             check_resume(out, args.task, agent=args.agent, seed=seed, model=args.model, graph=args.graph,
                          low_level=args.low_level, overrides=args.set or [])

@@ -31,14 +31,12 @@ import numpy as np
 import torch
 import yaml
 
+from ..errors import CheckpointError
+
 __all__ = ["atomic_path", "atomic_write", "append_text", "write_text", "write_json", "write_yaml", "save_torch",
            "load_checkpoint", "checkpoint_globals", "is_temp_file", "truncate_csv", "CheckpointError"]
 
 _TMP_SUFFIX = ".tmp"
-
-
-class CheckpointError(RuntimeError):
-    """A checkpoint is missing, unreadable or unsafe; the message says which file and what to do."""
 
 
 class RunFileError(CheckpointError):

@@ -15,8 +15,8 @@ floats of its own, and Adam, the clipping and the Polyak step are elementwise pe
 per seed, as for a run alone: each folder continues from its own checkpoint, and a seed whose updates
 fall on other env steps than the others' after a resume takes them with the seeds it shares them with.
 
-``workers`` > 1 (``hubsgo train TASK --seeds ... --workers 2``) shares the seeds between spawned
-processes, each training its share (:func:`shares`) in lockstep.
+:func:`~.seeds.train_seeds` checks a request for several seeds and calls :func:`train_lockstep` in
+its process, or in each of the worker processes that share the seeds (``--workers``).
 
 Agents other than the hierarchical ones with a learned grid low level (``hubsgo``, ``hdqn``) run their
 seeds one after another in the process.
@@ -27,7 +27,7 @@ from __future__ import annotations
 import contextlib
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Callable
 
 import torch
 
@@ -39,7 +39,7 @@ from .driver import RunSession, _interrupted, train
 from .lock import run_folder_lock
 from .resolved import ResolvedRun, RunConfig, RunError
 
-__all__ = ["train_seeds", "seed_folders", "stacks", "shares"]
+__all__ = ["train_lockstep", "stacks"]
 
 
 def stacks(run: ResolvedRun) -> bool:
@@ -49,31 +49,10 @@ def stacks(run: ResolvedRun) -> bool:
     return run.agent in HIERARCHICAL and run.low_level == "learned" and run.family == "minigrid"
 
 
-def seed_folders(out: Path, seeds: Sequence[int]) -> list[Path]:
-    """The run folder of each seed under ``out``: ``out/seedK``."""
-    return [Path(out) / f"seed{s}" for s in seeds]
-
-
-def train_seeds(cfg: RunConfig, seeds: Sequence[int], outs: Sequence[Path], resume: bool | Sequence[bool] = False,
-                progress: bool = True, on_episode: Sequence[Callable[[Any], Any] | None] | None = None,
-                workers: int = 1) -> list[dict[str, Any]]:
-    """Train (or resume) the run ``cfg`` for each of ``seeds`` into ``outs``, in lockstep where the
-    agent allows; returns each seed's summary, as :func:`~.driver.train` does. ``resume``: one flag for
-    every seed, or one per seed; ``on_episode``: a function per seed called after each of its episodes;
-    ``workers``: processes (one CPU each) that share the seeds, each training its share in lockstep."""
-    seeds, outs = [int(s) for s in seeds], [Path(o) for o in outs]
-    resumes = [bool(resume)] * len(seeds) if isinstance(resume, bool) else [bool(r) for r in resume]
-    hooks = list(on_episode) if on_episode is not None else [None] * len(seeds)
-    if len(set(seeds)) != len(seeds):
-        raise RunError(f"--seeds lists a seed twice: {' '.join(map(str, seeds))}")
-    if len(outs) != len(seeds) or len(set(outs)) != len(outs):
-        raise RunError("each seed needs a run folder of its own")
-    if workers < 1:
-        raise RunError(f"--workers must be 1 or more, got {workers}")
-    if workers > 1 and len(seeds) > 1:
-        if any(h is not None for h in hooks):
-            raise RunError("per-seed episode hooks run in this process; train with workers=1")
-        return _in_workers(cfg, seeds, outs, resumes, progress, workers)
+def train_lockstep(cfg: RunConfig, seeds: list[int], outs: list[Path], resumes: list[bool], progress: bool,
+                   hooks: list[Callable[[Any], Any] | None]) -> list[dict[str, Any]]:
+    """Train (or resume) the seeds of ``cfg`` in this process, in lockstep: the in-process part of
+    :func:`~.seeds.train_seeds`, which checks the arguments (one folder, resume flag and hook per seed)."""
     if len(seeds) == 1:
         return [train(replace(cfg, seed=seeds[0]), outs[0], resume=resumes[0], progress=progress,
                       on_episode=hooks[0])]
@@ -90,77 +69,6 @@ def train_seeds(cfg: RunConfig, seeds: Sequence[int], outs: Sequence[Path], resu
     except KeyboardInterrupt:
         raise RunError("; ".join(f"seed {s}: {_interrupted(out, w)}" for s, out, w in zip(seeds, outs, wheres))) \
             from None
-
-
-def shares(n: int, workers: int) -> list[range]:
-    """The seeds' indices each of ``workers`` processes trains: consecutive runs of them, the largest
-    share halved while there are fewer shares than workers (5 seeds on 2 workers: 3 and 2)."""
-    out = [range(n)]
-    while len(out) < workers and max(map(len, out)) > 1:
-        big = max(range(len(out)), key=lambda i: len(out[i]))
-        r = out[big]
-        half = (len(r) + 1) // 2
-        out[big:big + 1] = [r[:half], r[half:]]
-    return out
-
-
-def _share_child(cfg: RunConfig, seeds: list[int], outs: list[Path], resumes: list[bool], progress: bool,
-                 conn: Any) -> None:
-    """A worker: its share of the seeds in lockstep; sends back their summaries or the one-line error
-    (an interruption included: :func:`train_seeds` says where each seed stopped)."""
-    from ..specs import SpecError
-    from .io import CheckpointError
-
-    try:
-        conn.send(("ok", train_seeds(cfg, seeds, outs, resumes, progress=progress)))
-    except (RunError, CheckpointError, SpecError) as exc:
-        conn.send(("error", " ".join(str(exc).split())))
-    except BaseException as exc:  # noqa: BLE001 - reported to the parent as one line
-        conn.send(("error", f"seeds {' '.join(map(str, seeds))}: {type(exc).__name__}: {exc}"))
-    finally:
-        conn.close()
-
-
-def _in_workers(cfg: RunConfig, seeds: list[int], outs: list[Path], resumes: list[bool], progress: bool,
-                workers: int) -> list[dict[str, Any]]:
-    """:func:`train_seeds` with the seeds shared between ``workers`` spawned processes (:func:`shares`)."""
-    import multiprocessing as mp
-    from multiprocessing.connection import wait
-
-    ctx = mp.get_context("spawn")
-    waiting = {}        # the pipe each worker answers on -> (its seeds' indices, the process)
-    for i, idx in enumerate(shares(len(seeds), workers)):
-        recv, send = ctx.Pipe(duplex=False)
-        proc = ctx.Process(target=_share_child, name=f"seeds:{seeds[idx[0]]}",
-                           args=(cfg, [seeds[j] for j in idx], [outs[j] for j in idx], [resumes[j] for j in idx],
-                                 progress and i == 0, send))
-        proc.start()
-        send.close()
-        waiting[recv] = (idx, proc)
-    summaries: list[dict[str, Any] | None] = [None] * len(seeds)
-    errors = []
-    while waiting:
-        try:
-            ready = wait(list(waiting))
-        except KeyboardInterrupt:       # the workers got it too: each reports where its seeds stopped
-            continue
-        for recv in ready:
-            idx, proc = waiting.pop(recv)
-            try:
-                kind, value = recv.recv()
-            except (EOFError, OSError):
-                kind, value = "error", None
-            proc.join()
-            if value is None:
-                value = f"the worker of seeds {' '.join(str(seeds[j]) for j in idx)} died (exit code {proc.exitcode})"
-            if kind == "ok":
-                for j, summary in zip(idx, value):
-                    summaries[j] = summary
-            else:
-                errors.append((idx[0], value))
-    if errors:
-        raise RunError("; ".join(msg for _, msg in sorted(errors)))
-    return summaries
 
 
 class _Lockstep:

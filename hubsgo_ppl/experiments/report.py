@@ -32,6 +32,7 @@ import numpy as np
 import pandas as pd
 import yaml
 
+from ..errors import ReportError
 from .io import atomic_write, write_text
 from .logger import read_csv_rows
 
@@ -126,10 +127,6 @@ class Cell:
     n: int
     mean: float
     se: float                    # nan when n < 2
-
-
-class ReportError(Exception):
-    """A folder that does not hold what `hubsgo sweep` writes; the message says what is wrong."""
 
 
 def _layout(sweep_dir: Path) -> tuple[list[str], list[str], dict[str, str], str | None]:

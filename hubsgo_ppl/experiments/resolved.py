@@ -14,6 +14,8 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
+from ..errors import RunError
+
 __all__ = ["RunConfig", "ResolvedRun", "RunError", "CHECKPOINT_STEPS", "HISTORY_EVERY"]
 
 #: env steps between checkpoints. Counted in env steps, not episodes (as Stable-Baselines3's
@@ -22,10 +24,6 @@ __all__ = ["RunConfig", "ResolvedRun", "RunError", "CHECKPOINT_STEPS", "HISTORY_
 CHECKPOINT_STEPS = 5_000
 #: training episodes between snapshots of the critic's marginals (critic_history.csv)
 HISTORY_EVERY = 5
-
-
-class RunError(RuntimeError):
-    """A run cannot start or continue; the message names the cause and the fix."""
 
 
 @dataclass

@@ -96,10 +96,10 @@ class Variant(StrictModel):
     @field_validator("agent")
     @classmethod
     def _agent_ok(cls, v: str) -> str:
-        from ..agents.factory import agent_names
+        from ..agents.config import AGENTS
 
-        if v not in agent_names():
-            raise ValueError(f"unknown agent {v!r}; use one of: {', '.join(agent_names())}")
+        if v not in AGENTS:
+            raise ValueError(f"unknown agent {v!r}; use one of: {', '.join(AGENTS)}")
         return v
 
     @field_validator("task", "model")

@@ -50,7 +50,7 @@ def run_bundle(jobs: list[Job]) -> list[dict[str, Any]]:
     raises: returns each run's ``{"ok": bool, "error": str | None, ...}`` (an error stops them all)."""
     import torch
 
-    from .lockstep import train_seeds
+    from .seeds import train_seeds
 
     torch.set_num_threads(1)
     outs = [Path(job.out) for job in jobs]

@@ -7,7 +7,7 @@ import pytest
 
 from hubsgo_ppl.cli import main
 from hubsgo_ppl.experiments import driver
-from hubsgo_ppl.experiments.lockstep import seed_folders, train_seeds
+from hubsgo_ppl.experiments.seeds import seed_folders, train_seeds
 from hubsgo_ppl.experiments.run import RunConfig, RunError, train
 
 TINY = ["high.learning_starts=8", "high.batch_size=8", "low.learning_starts=64", "low.batch_size=32",
@@ -95,7 +95,7 @@ def test_the_cli_trains_seeds_into_out_seedk_and_refuses_mixed_flags(tmp_path, c
 
 
 def test_shares_split_the_seeds_into_consecutive_runs_one_per_worker():
-    from hubsgo_ppl.experiments.lockstep import shares
+    from hubsgo_ppl.experiments.seeds import shares
 
     assert [list(r) for r in shares(5, 2)] == [[0, 1, 2], [3, 4]]
     assert [list(r) for r in shares(5, 3)] == [[0, 1], [2], [3, 4]]
@@ -117,3 +117,16 @@ def test_seeds_shared_between_worker_processes_give_each_seeds_own_files(lockste
     assert err.count("already holds a run") == 2 and "Traceback" not in err
     assert main(["train", "keydoor", "--seed", "0", "--workers", "2", "--out", str(tmp_path / "v")]) == 2
     assert "--workers shares the seeds of --seeds" in capsys.readouterr().err
+
+
+def test_the_process_that_hands_its_seeds_to_workers_imports_no_torch_and_says_a_shared_refusal_once(tmp_path):
+    import subprocess
+    import sys
+
+    code = ("import sys; from hubsgo_ppl.cli import main; "
+            "rc = main(['train', 'nosuch', '--seeds', '0', '1', '--workers', '2', '--out', sys.argv[1]]); "
+            "print(rc, 'torch' in sys.modules)")
+    done = subprocess.run([sys.executable, "-c", code, str(tmp_path / "w")], capture_output=True, text=True,
+                          timeout=300)
+    assert done.stdout.split() == ["2", "False"], done.stderr
+    assert done.stderr.count("unknown task 'nosuch'") == 1 and "Traceback" not in done.stderr
