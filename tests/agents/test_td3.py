@@ -1,5 +1,5 @@
-"""TD3Core (the TD3 core shared by HIRO and GoalTD3): SB3's Polyak update, the initialisation order, checkpoint
-names, and target clipping."""
+"""TD3Core (the TD3 core shared by HIRO and GoalTD3): SB3's Polyak update, the multi-tensor Adam and Polyak
+steps against the per-tensor ones, the initialisation order, checkpoint names, and target clipping."""
 
 import numpy as np
 import torch
@@ -23,6 +23,47 @@ def test_polyak_update_is_the_in_place_formula_bit_for_bit():
             pt.mul_(1 - 0.005).add_(p, alpha=0.005)
     polyak_update(net.parameters(), b.parameters(), 0.005)
     assert all(torch.equal(x, y) for x, y in zip(a.parameters(), b.parameters()))
+
+
+def test_multi_tensor_adam_and_polyak_give_the_per_tensor_loops_floats_and_a_per_tensor_state_resumes(monkeypatch):
+    from hubsgo_ppl.agents import td3
+
+    ours, theirs = _core(), _core()
+    for opt in (theirs.actor_opt, theirs.critic_opt):       # torch's default on CPU: one tensor at a time
+        for group in opt.param_groups:
+            group["foreach"] = None
+    g = torch.Generator().manual_seed(2)
+
+    def step(core, per_tensor):
+        batch = [torch.randn(32, 5, generator=g), torch.rand(32, 2, generator=g) * 2 - 1,
+                 torch.randn(32, generator=g), torch.randn(32, 5, generator=g), 0.9, torch.randn(32, 2, generator=g)]
+        with monkeypatch.context() as m:
+            if per_tensor:
+                m.setattr(td3, "_polyak", lambda a, b, tau: polyak_update(a.parameters(), b.parameters(), tau))
+            core.update(*batch)
+
+    def same(a, b):
+        sa, sb = a.state_dict(), b.state_dict()
+        return all(torch.equal(x, y) for k in ("actor", "actor_target", "critics", "critics_target")
+                   for x, y in zip(sa[k].values(), sb[k].values())) and all(
+            torch.equal(x["exp_avg_sq"], y["exp_avg_sq"]) for k in ("actor_opt", "critic_opt")
+            for x, y in zip(sa[k]["state"].values(), sb[k]["state"].values()))
+
+    for _ in range(7):
+        state = g.get_state()
+        step(ours, False)
+        g.set_state(state)
+        step(theirs, True)
+    assert same(ours, theirs) and ours.actor_opt.state_dict()["state"]      # the actor has stepped too
+    again = _core()
+    again.load_state_dict(theirs.state_dict())      # a state written by the per-tensor loop
+    again.updates = theirs.updates                  # the caller's to store
+    assert all(grp["foreach"] for opt in (again.actor_opt, again.critic_opt) for grp in opt.param_groups)
+    for core in (ours, again):
+        g.manual_seed(3)
+        for _ in range(4):
+            step(core, False)
+    assert same(ours, again)
 
 
 def test_init_order_decides_which_network_gets_which_draws():
