@@ -6,7 +6,8 @@ TD3 (Fujimoto, van Hoof, Meger 2018): a deterministic actor ``tanh(·)``, twin c
 is the target, target policy smoothing, and delayed actor and target updates. The target networks
 follow with SB3's Polyak update. Adam and the Polyak update run as one ``_foreach`` operation per step
 over all of a module's tensors (torch's multi-tensor Adam), the same floats as the per-tensor loops at a
-fraction of their Python overhead (tests/agents/test_td3.py). Inputs and outputs are plain tensors: what goes into the networks
+fraction of their Python overhead (tests/agents/test_td3.py), with subnormal moments flushed to zero
+(``nets.flushing_subnormals``). Inputs and outputs are plain tensors: what goes into the networks
 (observations, goals, normalisation) is the caller's business.
 
 Actions live either in ``[-1, 1]`` (``scale=None``; GoalTD3 maps them to the env's bounds itself) or
@@ -23,7 +24,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from .nets import mlp
+from .nets import flushing_subnormals, mlp
 
 __all__ = ["TD3Core", "TD3Step", "NETS"]
 
@@ -112,7 +113,8 @@ class TD3Core:
         critic_loss = F.mse_loss(q1, y) + F.mse_loss(q2, y)
         self.critic_opt.zero_grad()
         critic_loss.backward()
-        self.critic_opt.step()
+        with flushing_subnormals():     # as the DQN learners' Adam (agents/nets.py)
+            self.critic_opt.step()
         self.updates += 1
         actor_loss = None
         if self.updates % self.policy_delay == 0:
@@ -124,7 +126,8 @@ class TD3Core:
                 loss = loss + actor_extra(pi)
             self.actor_opt.zero_grad()
             loss.backward()
-            self.actor_opt.step()
+            with flushing_subnormals():
+                self.actor_opt.step()
             _polyak(self.actor, self.actor_target, self.tau)
             _polyak(self.critics, self.critics_target, self.tau)
             actor_loss = loss.item()
