@@ -14,11 +14,9 @@ __all__ = ["cmd_train", "cmd_revise"]
 def cmd_train(args: argparse.Namespace) -> int:
     if args.seeds is not None:
         return _train_seeds(args)
-    from ..experiments.run import RunConfig, check_resume, train
+    from ..experiments.run import RunConfig, RunError, check_resume, train
 
     if args.workers != 1:
-        from ..experiments.run import RunError
-
         raise RunError("--workers shares the seeds of --seeds between processes; one --seed trains in one")
     agent, seed = args.agent or "hubsgo", 0 if args.seed is None else args.seed
     out = Path(args.out) if args.out else Path("runs") / f"{args.task}-{agent}-s{seed}"
@@ -26,8 +24,6 @@ def cmd_train(args: argparse.Namespace) -> int:
         check_resume(out, args.task, agent=args.agent, seed=args.seed, model=args.model, graph=args.graph,
                      low_level=args.low_level, overrides=args.set or [], init_from=args.init_from)
     if (args.transfer is not None or args.restart_schedules) and args.init_from is None:
-        from ..experiments.run import RunError
-
         flag = "--transfer names what to take" if args.transfer is not None else "--restart-schedules is about what is taken"
         raise RunError(f"{flag} from the run given by --init-from; add --init-from RUN")
     cfg = RunConfig(task=args.task, agent=agent, model=args.model, graph=args.graph, steps=args.steps,
