@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 __all__ = ["cmd_sweep", "cmd_report"]
 
@@ -24,7 +25,10 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 def cmd_report(args: argparse.Namespace) -> int:
     from ..experiments.report import write_report
 
-    paths = write_report(args.sweep_dir, out=args.out, sweep=args.sweep)
+    notes: list[str] = []
+    paths = write_report(args.sweep_dir, out=args.out, sweep=args.sweep, notes=notes)
     for kind, path in paths.items():
         print(f"{kind}: {path}")
+    for note in notes:
+        print(f"hubsgo report: {note}", file=sys.stderr)
     return 0

@@ -87,6 +87,12 @@ class RunSummary:
     returns: np.ndarray
     successes: np.ndarray | None = None     # per episode, 0/1
     g_star: tuple[str, ...] | None = None   # the most probable set of subgoals.json, where the run has one
+    budget: int | None = None               # the env-step budget its config.yaml records (None: no config.yaml)
+
+    @property
+    def finished(self) -> bool:
+        """Whether the run has spent its budget (as training decides it); a run without a recorded budget counts."""
+        return self.budget is None or self.env_steps >= self.budget
 
 
 def steps_to_success(steps: np.ndarray, successes: np.ndarray, rate: float = 0.9,
@@ -171,8 +177,16 @@ def collect(sweep_dir: str | Path) -> list[RunSummary]:
         tail = rets[-max(1, len(rets) // 10):]
         out.append(RunSummary(run.parent.parent.name, run.parent.name, seed, len(rows), int(steps[-1]),
                               float(rets.mean()), float(tail.mean()), float(succ.mean()), steps, rets, succ,
-                              _g_star(run)))
+                              _g_star(run), _budget(run)))
     return out
+
+
+def _budget(run: Path) -> int | None:
+    """The env-step budget ``run/config.yaml`` records, or None where it records none."""
+    from .checkpoint import read_config_file
+
+    steps = ((read_config_file(run) or {}).get("hyper") or {}).get("steps")
+    return int(steps) if isinstance(steps, (int, float)) and not isinstance(steps, bool) else None
 
 
 def aggregate(runs: list[RunSummary]) -> dict[tuple[str, str], Cell]:
@@ -308,13 +322,15 @@ def _csv(rows: list[dict[str, Any]]) -> str:
 
 
 def write_report(sweep_dir: str | Path, out: str | Path | None = None, bins: int = 40,
-                 sweep: str | Path | None = None) -> dict[str, Path]:
+                 sweep: str | Path | None = None, notes: list[str] | None = None) -> dict[str, Path]:
     """Write ``results.md`` (tables), ``results.csv`` (per run and aggregated), ``curves.csv`` and one
     ``curve_<task>.png`` per task into ``out`` (default ``SWEEP_DIR/report``). Returns the paths.
 
     ``sweep`` (a sweep .yaml or built-in name) limits the report to that grid's tasks, variants and
     seeds, for a folder that several sweeps have run into; by default the layout comes from the
-    folder's ``sweep.yaml`` (the last sweep run there) and every run found is reported.
+    folder's ``sweep.yaml`` (the last sweep run there) and every run found is reported. A run short of
+    the budget its ``config.yaml`` records (a sweep still running, or interrupted) is left out of the
+    tables and curves, and ``results.md`` names it (as does a line added to ``notes``, where given).
     """
     sweep_dir = Path(sweep_dir)
     if not sweep_dir.is_dir():
@@ -328,9 +344,13 @@ def write_report(sweep_dir: str | Path, out: str | Path | None = None, bins: int
         labels = {v.name: v.label or v.name for v in spec.variants}
         table = spec.table
         runs = [r for r in runs if r.task in tasks and r.variant in variants and r.seed in spec.seeds]
+    unfinished = [r for r in runs if not r.finished]     # a sweep still running, or stopped: not in the tables
+    runs = [r for r in runs if r.finished]
     if not runs:
-        raise ReportError(f"{sweep_dir}: no runs with metrics (expected <task>/<variant>/seed<k>/metrics.csv)"
-                                f"{' of the grid ' + str(sweep) if sweep is not None else ''}; run `hubsgo sweep` first")
+        raise ReportError(f"{sweep_dir}: no finished runs (expected <task>/<variant>/seed<k>/metrics.csv)"
+                          f"{' of the grid ' + str(sweep) if sweep is not None else ''}"
+                          f"{f', {len(unfinished)} still short of their budget' if unfinished else ''}; "
+                          "run `hubsgo sweep` (again) first")
     if sweep is None:
         tasks, variants, labels, table = _layout(sweep_dir)
         tasks += sorted({r.task for r in runs} - set(tasks))
@@ -345,6 +365,13 @@ def write_report(sweep_dir: str | Path, out: str | Path | None = None, bins: int
     if table in PAPER:
         md += ["", _paper_table(table, tasks, variants, labels)]
     md += ["", success_table(runs, tasks, variants, labels)]
+    if unfinished and notes is not None:
+        notes.append(f"left out {len(unfinished)} run(s) short of their budget (results.md names them); "
+                     "`hubsgo sweep` with the same arguments finishes them")
+    if unfinished:
+        md += ["", f"Left out, short of their budget ({len(unfinished)}; `hubsgo sweep` again finishes them): "
+               + ", ".join(f"{r.task}/{r.variant}/seed{r.seed} at {r.env_steps:,} of {r.budget:,} env steps"
+                           for r in sorted(unfinished, key=lambda r: (r.task, r.variant, r.seed))) + "."]
     paths: dict[str, Path] = {"table": write_text(out / "results.md", "\n".join(md))}
 
     rows: list[dict[str, Any]] = []

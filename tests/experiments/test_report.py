@@ -94,8 +94,33 @@ def test_report_errors_name_the_problem(tmp_path):
     with pytest.raises(ReportError, match="no such sweep directory"):
         write_report(tmp_path / "missing")
     (tmp_path / "empty").mkdir()
-    with pytest.raises(ReportError, match="no runs with metrics"):
+    with pytest.raises(ReportError, match="no finished runs"):
         write_report(tmp_path / "empty")
+
+
+def test_a_run_short_of_its_recorded_budget_is_left_out_and_named(sweep_dir, tmp_path):
+    """A sweep still running (or interrupted): its short runs stay out of the cells and curves."""
+    root, expected = sweep_dir
+    short = root / "keydoor" / "ppo" / "seed2"
+    (short / "config.yaml").write_text(yaml.safe_dump({"task": "keydoor", "hyper": {"steps": 5000}}))
+    (root / "keydoor" / "ppo" / "seed0" / "config.yaml").write_text(yaml.safe_dump({"hyper": {"steps": 1000}}))
+    notes = []
+    paths = write_report(root, out=tmp_path / "rep", notes=notes)
+    text = paths["table"].read_text()
+    line = next(l for l in text.split("The paper's")[0].splitlines() if l.startswith("| PPO |"))
+    m, s = map(float, re.fullmatch(r"(\S+) ± (\S+)", line.strip("|").split("|")[2].strip()).groups())
+    kept = expected[("ppo", "keydoor")][:2]         # seeds 0 (finished: 1000 of 1000) and 1 (no config.yaml)
+    assert m == pytest.approx(statistics.fmean(kept), abs=5e-5)
+    assert s == pytest.approx(statistics.stdev(kept) / math.sqrt(2), abs=5e-5)
+    assert "keydoor/ppo/seed2 at 1,000 of 5,000 env steps" in text
+    assert len(notes) == 1 and "left out 1 run(s)" in notes[0]
+    for seed in (0, 1):
+        (root / "keydoor" / "ppo" / f"seed{seed}" / "config.yaml").write_text(yaml.safe_dump({"hyper": {"steps": 5000}}))
+    only = tmp_path / "only"
+    (only / "keydoor").mkdir(parents=True)
+    (root / "keydoor" / "ppo").rename(only / "keydoor" / "ppo")
+    with pytest.raises(ReportError, match="no finished runs.*3 still short of their budget"):
+        write_report(only)
 
 
 def test_report_limited_to_one_grid_of_a_shared_folder(sweep_dir, tmp_path):
