@@ -14,7 +14,7 @@ from typing import Any, Mapping
 from .io import CheckpointError, load_checkpoint, save_torch
 from .resolved import ResolvedRun, RunError, as_resolved
 
-__all__ = ["CHECKPOINT", "CHECKPOINT_FORMAT", "RUN_FILES", "EPISODE_LOGS", "G_STAR_SAMPLES", "save_checkpoint",
+__all__ = ["CHECKPOINT", "checkpoint_env_steps", "CHECKPOINT_FORMAT", "RUN_FILES", "EPISODE_LOGS", "G_STAR_SAMPLES", "save_checkpoint",
            "read_checkpoint", "read_config_file", "recorded_run", "run_config", "run_dir_checkpoint", "subgoal_table"]
 
 CHECKPOINT = "checkpoint.pt"
@@ -82,6 +82,15 @@ def read_config_file(out: Path) -> dict[str, Any] | None:
     except (OSError, UnicodeDecodeError, yaml.YAMLError):
         return None
     return cfg if isinstance(cfg, dict) else None
+
+
+def checkpoint_env_steps(out: str | Path) -> int | None:
+    """The env steps ``out``'s checkpoint records (read memory-mapped), or None where there is none or it
+    cannot be read (``train --resume`` says why)."""
+    try:
+        return int(load_checkpoint(Path(out) / CHECKPOINT, mmap=True)["env_steps"])
+    except (CheckpointError, KeyError, TypeError, ValueError):
+        return None
 
 
 def recorded_run(out: Path) -> ResolvedRun | None:

@@ -33,6 +33,7 @@ import pandas as pd
 import yaml
 
 from ..errors import ReportError
+from .checkpoint import checkpoint_env_steps, read_config_file
 from .io import atomic_write, write_text
 from .logger import read_csv_rows
 
@@ -88,11 +89,17 @@ class RunSummary:
     successes: np.ndarray | None = None     # per episode, 0/1
     g_star: tuple[str, ...] | None = None   # the most probable set of subgoals.json, where the run has one
     budget: int | None = None               # the env-step budget its config.yaml records (None: no config.yaml)
+    spent: int | None = None                # env steps its checkpoint records (None: none readable)
+
+    @property
+    def done(self) -> int:
+        """Env steps trained: the checkpoint's count (a flat agent stops mid-episode, past the last row)."""
+        return self.env_steps if self.spent is None else self.spent
 
     @property
     def finished(self) -> bool:
-        """Whether the run has spent its budget (as training decides it); a run without a recorded budget counts."""
-        return self.budget is None or self.env_steps >= self.budget
+        """Whether the run has spent its budget (as `hubsgo sweep` decides it); one without a recorded budget counts."""
+        return self.budget is None or self.done >= self.budget
 
 
 def steps_to_success(steps: np.ndarray, successes: np.ndarray, rate: float = 0.9,
@@ -177,14 +184,12 @@ def collect(sweep_dir: str | Path) -> list[RunSummary]:
         tail = rets[-max(1, len(rets) // 10):]
         out.append(RunSummary(run.parent.parent.name, run.parent.name, seed, len(rows), int(steps[-1]),
                               float(rets.mean()), float(tail.mean()), float(succ.mean()), steps, rets, succ,
-                              _g_star(run), _budget(run)))
+                              _g_star(run), _budget(run), checkpoint_env_steps(run)))
     return out
 
 
 def _budget(run: Path) -> int | None:
     """The env-step budget ``run/config.yaml`` records, or None where it records none."""
-    from .checkpoint import read_config_file
-
     steps = ((read_config_file(run) or {}).get("hyper") or {}).get("steps")
     return int(steps) if isinstance(steps, (int, float)) and not isinstance(steps, bool) else None
 
@@ -370,7 +375,7 @@ def write_report(sweep_dir: str | Path, out: str | Path | None = None, bins: int
                      "`hubsgo sweep` with the same arguments finishes them")
     if unfinished:
         md += ["", f"Left out, short of their budget ({len(unfinished)}; `hubsgo sweep` again finishes them): "
-               + ", ".join(f"{r.task}/{r.variant}/seed{r.seed} at {r.env_steps:,} of {r.budget:,} env steps"
+               + ", ".join(f"{r.task}/{r.variant}/seed{r.seed} at {r.done:,} of {r.budget:,} env steps"
                            for r in sorted(unfinished, key=lambda r: (r.task, r.variant, r.seed))) + "."]
     paths: dict[str, Path] = {"table": write_text(out / "results.md", "\n".join(md))}
 

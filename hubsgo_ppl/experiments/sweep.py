@@ -42,7 +42,8 @@ from pydantic import Field, field_validator, model_validator
 from ..resources import sweeps_dir
 from ..specs import SpecError, StrictModel, load_yaml, validate_spec
 from ..validation import VALUE_CHARS, shorten
-from .io import CheckpointError, load_checkpoint, write_yaml
+from .checkpoint import checkpoint_env_steps
+from .io import write_yaml
 from .run import CHECKPOINT, CHECKPOINT_STEPS, RunConfig, RunError
 from .sweep_workers import KILL_ENV, Job, local, ray_tasks, run_job
 
@@ -252,14 +253,10 @@ def check_jobs(jobs: list[Job], path: Path) -> None:
 
 def run_status(job: Job) -> str:
     """``"finished"`` (checkpoint at or past the budget), ``"partial"`` (a checkpoint short of it) or ``"new"``."""
-    ckpt = Path(job.out) / CHECKPOINT
-    if not ckpt.is_file():
+    if not (Path(job.out) / CHECKPOINT).is_file():
         return "new"
-    try:
-        steps = int(load_checkpoint(ckpt, mmap=True)["env_steps"])
-    except (CheckpointError, KeyError, TypeError, ValueError):   # damaged: train() reports it on resume
-        return "partial"
-    return "finished" if steps >= job.budget else "partial"
+    steps = checkpoint_env_steps(job.out)      # None: damaged, which train() reports on resume
+    return "finished" if steps is not None and steps >= job.budget else "partial"
 
 
 def select(spec: SweepSpec, path: Path, variants: list[str] | None = None,

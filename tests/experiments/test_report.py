@@ -114,6 +114,11 @@ def test_a_run_short_of_its_recorded_budget_is_left_out_and_named(sweep_dir, tmp
     assert s == pytest.approx(statistics.stdev(kept) / math.sqrt(2), abs=5e-5)
     assert "keydoor/ppo/seed2 at 1,000 of 5,000 env steps" in text
     assert len(notes) == 1 and "left out 1 run(s)" in notes[0]
+    from hubsgo_ppl.experiments.io import save_torch
+
+    save_torch(short / "checkpoint.pt", {"format": 1, "env_steps": 5000})   # a flat agent stops mid-episode:
+    assert "seed2" not in write_report(root, out=tmp_path / "rep2")["table"].read_text()  # its last row is short
+    (short / "checkpoint.pt").unlink()
     for seed in (0, 1):
         (root / "keydoor" / "ppo" / f"seed{seed}" / "config.yaml").write_text(yaml.safe_dump({"hyper": {"steps": 5000}}))
     only = tmp_path / "only"
