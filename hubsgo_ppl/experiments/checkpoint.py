@@ -14,8 +14,9 @@ from typing import Any, Mapping
 from .io import CheckpointError, load_checkpoint, save_torch
 from .resolved import ResolvedRun, RunError, as_resolved
 
-__all__ = ["CHECKPOINT", "checkpoint_env_steps", "CHECKPOINT_FORMAT", "RUN_FILES", "EPISODE_LOGS", "G_STAR_SAMPLES", "save_checkpoint",
-           "read_checkpoint", "read_config_file", "recorded_run", "run_config", "run_dir_checkpoint", "subgoal_table"]
+__all__ = ["CHECKPOINT", "CHECKPOINT_FORMAT", "RUN_FILES", "EPISODE_LOGS", "G_STAR_SAMPLES", "save_checkpoint",
+           "read_checkpoint", "checkpoint_env_steps", "read_config_file", "recorded_run", "run_config",
+           "run_dir_checkpoint", "subgoal_table"]
 
 CHECKPOINT = "checkpoint.pt"
 #: version of the checkpoint layout (``{"format", "config", "agent", "episodes", "env_steps", "wall_time"}``)
