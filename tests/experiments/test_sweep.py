@@ -72,6 +72,11 @@ def test_every_shipped_sweep_plans_and_the_ten_seed_grid_extends_the_acceptance_
     for f in sorted(sweeps_dir().glob("*.yaml")):
         spec, _ = load_sweep(f.stem)
         assert plan(spec, tmp_path), f.name
+    # run into Table 1's folder, Table 2's grid reuses its runs and trains only the rows with incorrect sub-goals
+    t1 = {j.run_id: j.config for j in plan(load_sweep("table1")[0], tmp_path)}
+    t2 = {j.run_id: j.config for j in plan(load_sweep("table2")[0], tmp_path)}
+    assert all(t2[k] == t1[k] for k in set(t1) & set(t2))
+    assert {k.split("/")[1] for k in set(t2) - set(t1)} == {"hubsgo-incorrect", "hdqn-incorrect"}
     # run into the same folder, the ten-seed KeyDoor grid reuses the 5-seed acceptance runs as its seeds 0-4
     five = {j.run_id: j.config for j in plan(load_sweep("keydoor_acceptance")[0], tmp_path)}
     ten = {j.run_id: j.config for j in plan(load_sweep("keydoor_ten_seeds")[0], tmp_path)}
