@@ -81,7 +81,7 @@ def _cardinal_rows(rows: dict[str, dict[str, tuple[float, float]]]) -> dict[str,
     """The paper's maze baselines most likely ran with the cardinal action set (docs/mazes.md): the rows
     run on it stand beside the paper's rows of the same agent."""
     return {f"{agent} (cardinal actions)": {t: rows[agent][t] for t in ("fourroom", "keydoor")}
-            for agent in ("HIRO", "HIGL")}
+            for agent in ("HIRO", "HIGL", "PPO") if agent in rows}
 
 
 for _rows in PAPER.values():
