@@ -314,7 +314,7 @@ def _plot(task: str, data: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]],
           path: Path) -> Path:
     from matplotlib.figure import Figure   # no pyplot: leaves the caller's backend alone
 
-    fig = Figure(figsize=(7, 4))
+    fig = Figure(figsize=(9, 4))
     ax = fig.subplots()
     for i, (v, (x, m, se)) in enumerate(data.items()):
         ax.plot(x, m, color=f"C{i % 10}", lw=1.8, label=labels.get(v, v))
@@ -323,7 +323,7 @@ def _plot(task: str, data: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]],
     ax.set_ylabel("episodic return")
     ax.set_title(f"{task}: mean ± s.e. across seeds")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, loc="best")
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))   # beside the axes, off the curves
     fig.tight_layout()
     atomic_write(path, lambda fh: fig.savefig(fh, format="png", dpi=110))
     return path
