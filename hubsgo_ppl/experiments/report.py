@@ -84,8 +84,7 @@ def _cardinal_rows(rows: dict[str, dict[str, tuple[float, float]]]) -> dict[str,
             for agent in ("HIRO", "HIGL", "PPO") if agent in rows}
 
 
-for _rows in PAPER.values():
-    _rows.update(_cardinal_rows(_rows))
+PAPER = {table: rows | _cardinal_rows(rows) for table, rows in PAPER.items()}
 
 
 @dataclass
