@@ -117,7 +117,8 @@ def env_notes(env: gym.Env) -> list[str]:
     """Optional parts of the contract the env lacks, and which low level misses them."""
     task = env.unwrapped
     notes = []
-    if not callable(getattr(task, "subgoal_potential", None)):
+    grid = isinstance(env.action_space, gym.spaces.Discrete)    # the arms' learned low level reaches targets
+    if grid and not callable(getattr(task, "subgoal_potential", None)):
         notes.append("no subgoal_potential(): the learned grid low level trains without shaping "
                      "(--set low.shaping=0)")
     if not callable(getattr(task, "subgoal_target", None)):

@@ -54,11 +54,13 @@ def test_every_shipped_maze_meets_the_contract():
 
 
 @pytest.mark.mujoco
-def test_an_arm_task_meets_the_contract_and_is_noted_to_have_no_shaping():
+def test_an_arm_task_meets_the_contract_with_no_note():
+    """Its low levels (scripted or learned) reach subgoal_target; the grid low level's shaping
+    (subgoal_potential) does not apply to a continuous action space, so it is not noted as missing."""
     env = make("push_any_one")
     try:
         assert check_env(env, steps=10) == []
-        assert [n.split("(")[0] for n in env_notes(env)] == ["no subgoal_potential"]
+        assert env_notes(env) == []
     finally:
         env.close()
 

@@ -35,9 +35,23 @@ from robosuite.utils.placement_samplers import ObjectPositionSampler, Sequential
 from ...specs import SpecError
 from ..subgoals import Catalogue, SubgoalDef
 
-__all__ = ["SubgoalManipulationEnv", "SubgoalKind", "osc_position_controller", "set_sampler_rng"]
+__all__ = ["SubgoalManipulationEnv", "SubgoalKind", "osc_position_controller", "set_sampler_rng", "COLOURS",
+           "colour_option"]
 
 OPEN, CLOSED = -1.0, 1.0   # gripper commands
+
+#: the cube colours a catalogue may name (``options.colours`` of PushAnyOne, ``options.cubes`` of StackCubes)
+COLOURS = {"red": (1, 0, 0, 1), "green": (0, 1, 0, 1), "blue": (0, 0, 1, 1), "yellow": (1, 1, 0, 1),
+           "magenta": (1, 0, 1, 1), "cyan": (0, 1, 1, 1)}
+
+
+def colour_option(catalogue: Any, key: str, value: Any, most: int, least: int = 1) -> tuple[str, ...]:
+    """A catalogue option that lists distinct cube colours of :data:`COLOURS`, checked in one line."""
+    colours = tuple(value) if isinstance(value, (list, tuple)) else (value,)
+    if not least <= len(colours) <= most or len(set(colours)) != len(colours) or not set(colours) <= set(COLOURS):
+        raise SpecError(f"{getattr(catalogue, 'source', 'catalogue')}: options.{key}: {list(colours)} is not "
+                        f"{least} to {most} distinct colours of: {', '.join(COLOURS)}")
+    return colours
 
 
 def osc_position_controller(robot: str = "Panda") -> dict[str, Any]:

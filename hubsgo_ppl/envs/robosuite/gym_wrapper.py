@@ -118,6 +118,6 @@ def make_robosuite_task(catalogue: str | Path | Catalogue, **kwargs: Any) -> Rob
         if "unexpected keyword" not in str(exc):
             raise
         raise SpecError(f"{cat.source}: options: {exc}; allowed options: robots, placement_initializer, horizon, "
-                        f"control_freq, seed, initialization_noise, travel_clearance, table_full_size (PushAnyOne also "
-                        f"colours, CollectThreeBalls wall_height)") from None
+                        f"control_freq, seed, initialization_noise, travel_clearance, table_full_size (StackCubes also "
+                        f"cubes and pads, PushAnyOne colours, CollectThreeBalls wall_height)") from None
     return RobosuiteTaskEnv(task)

@@ -7,13 +7,10 @@ from robosuite.models.objects import BoxObject
 from robosuite.models.tasks import ManipulationTask
 from robosuite.utils.placement_samplers import SequentialCompositeSampler, UniformRandomSampler
 
-from ...specs import SpecError
-from .base import CLOSED, SubgoalKind, SubgoalManipulationEnv
+from .base import CLOSED, COLOURS, SubgoalKind, SubgoalManipulationEnv, colour_option
 
 __all__ = ["PushAnyOne"]
 
-_RGBA = {"red": (1, 0, 0, 1), "green": (0, 1, 0, 1), "blue": (0, 0, 1, 1), "yellow": (1, 1, 0, 1),
-         "magenta": (1, 0, 1, 1), "cyan": (0, 1, 1, 1)}
 
 
 class PushAnyOne(SubgoalManipulationEnv):
@@ -95,22 +92,17 @@ class PushAnyOne(SubgoalManipulationEnv):
 
     def __init__(self, catalogue, *args, colours: tuple[str, ...] | list[str] = ("red", "green", "blue"), **kwargs):
         """``colours`` (a catalogue option): the cubes and their pads, one row each."""
-        colours = tuple(colours) if isinstance(colours, (list, tuple)) else (colours,)
-        if not 1 <= len(colours) <= self.max_colours or len(set(colours)) != len(colours) \
-                or not set(colours) <= set(_RGBA):
-            raise SpecError(f"{getattr(catalogue, 'source', 'catalogue')}: options.colours: {list(colours)} is not "
-                            f"1 to {self.max_colours} distinct colours of: {', '.join(_RGBA)}")
-        self.colours = colours
+        self.colours = colours = colour_option(catalogue, "colours", colours, self.max_colours)
         self.slots_y = tuple(float(y) for y in np.linspace(-0.15, 0.15, len(colours))) if len(colours) > 1 else (0.0,)
         super().__init__(catalogue, *args, **kwargs)
 
     def _load_model(self):
         arena = self._load_table()
-        self.objects = {c: BoxObject(name=c, size=[self.cube_half] * 3, rgba=list(_RGBA[c]),
+        self.objects = {c: BoxObject(name=c, size=[self.cube_half] * 3, rgba=list(COLOURS[c]),
                                      friction=self.cube_friction) for c in self.colours}
         self.locations = {}
         for c, y in zip(self.colours, self.slots_y):
-            self._add_location(arena, f"dest_{c}", (self.pad_x, y), rgba=_RGBA[c][:3] + (0.5,))
+            self._add_location(arena, f"dest_{c}", (self.pad_x, y), rgba=COLOURS[c][:3] + (0.5,))
         cubes = list(self.objects.values())
         if self.placement_initializer is not None:
             self.placement_initializer.reset()

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import numpy as np
 from robosuite.models.objects import BoxObject
 from robosuite.models.tasks import ManipulationTask
 from robosuite.utils.placement_samplers import UniformRandomSampler
 
-from .base import SubgoalManipulationEnv
+from ...specs import SpecError
+from .base import COLOURS, SubgoalManipulationEnv, colour_option
 
 __all__ = ["StackCubes"]
 
@@ -47,6 +49,14 @@ class StackCubes(SubgoalManipulationEnv):
     centre is drawn uniformly in x in [0.08, 0.14], y in [-0.08, 0.08]. Pass ``placement_initializer``
     to swap the cube sampler.
 
+    ## Catalogue options
+
+    ``cubes`` (default ``[red, green]``): one to four colours of red, green, blue, yellow, magenta,
+    cyan, the bottom of the stack first; the task is solved when they stand in that order on a pad.
+    ``pads`` (default ``[target]``): the names of one to three pads, any of which may carry the stack;
+    with more than one, each pad's centre is drawn in its own strip of y. A place option's route rises
+    to its target's height before it crosses, so a cube carried onto a stack clears it. The observation grows by 13 per extra cube (position, quaternion, hand-to-cube) and 3 per pad.
+
     ## Sub-goal catalogue (``envs/stack_cubes.yaml``)
 
     | name | kind | achieved when |
@@ -72,17 +82,47 @@ class StackCubes(SubgoalManipulationEnv):
     """
 
     cube_half = 0.02
+    cube_friction = (1.0, 5e-3, 1e-4)
     pad_x_range = (0.08, 0.14)
-    pad_y_range = (-0.08, 0.08)
+    pad_y_range = (-0.08, 0.08)     # one pad; with more, each its own strip of y in [-0.16, 0.16]
+    pad_half = 0.04
+    max_cubes = 4                   # a four-cube stack stands 16 cm, still under the hand's reach
+    max_pads = 3                    # three pads fill the 32 cm strip with 2 cm between them
+
+    def __init__(self, catalogue, *args, cubes: tuple[str, ...] | list[str] = ("red", "green"),
+                 pads: tuple[str, ...] | list[str] = ("target",), **kwargs):
+        """``cubes`` (a catalogue option): the colours, bottom of the stack first; ``pads``: the names of
+        the pads a stack may stand on."""
+        self.cubes = colour_option(catalogue, "cubes", cubes, self.max_cubes)
+        self.pads = self._pad_names(catalogue, pads)
+        super().__init__(catalogue, *args, **kwargs)
+
+    def _pad_names(self, catalogue, pads) -> tuple[str, ...]:
+        pads = tuple(pads) if isinstance(pads, (list, tuple)) else (pads,)
+        ok = all(isinstance(p, str) and p.isidentifier() and p not in COLOURS for p in pads)
+        if not ok or not 1 <= len(pads) <= self.max_pads or len(set(pads)) != len(pads):
+            raise SpecError(f"{getattr(catalogue, 'source', 'catalogue')}: options.pads: {list(pads)} is not 1 to "
+                            f"{self.max_pads} distinct names (letters, digits, _; not a cube colour), e.g. [target]")
+        return pads
+
+    def _pad_strips(self) -> list[tuple[float, float]]:
+        """The y range of each pad's centre: the default range for one pad, else equal strips of
+        [-0.16, 0.16] less the pad's half width and 1 cm, so no two pads touch."""
+        if len(self.pads) == 1:
+            return [self.pad_y_range]
+        edges = np.linspace(-0.16, 0.16, len(self.pads) + 1)
+        gap = self.pad_half + 0.01
+        return [(float(lo + gap), float(hi - gap)) for lo, hi in zip(edges[:-1], edges[1:])]
 
     def _load_model(self):
         arena = self._load_table()
-        self.red = BoxObject(name="red", size=[self.cube_half] * 3, rgba=[1, 0, 0, 1], friction=(1.0, 5e-3, 1e-4))
-        self.green = BoxObject(name="green", size=[self.cube_half] * 3, rgba=[0, 1, 0, 1], friction=(1.0, 5e-3, 1e-4))
-        self.objects = {"red": self.red, "green": self.green}
+        self.objects = {c: BoxObject(name=c, size=[self.cube_half] * 3, rgba=list(COLOURS[c]),
+                                     friction=self.cube_friction) for c in self.cubes}
         self.locations = {}
-        self._add_location(arena, "target", (0.11, 0.0), rgba=(0.5, 0.5, 0.5, 1))
-        cubes = [self.red, self.green]
+        for pad, (lo, hi) in zip(self.pads, self._pad_strips()):
+            self._add_location(arena, pad, (sum(self.pad_x_range) / 2, (lo + hi) / 2), rgba=(0.5, 0.5, 0.5, 1),
+                               half_size=(self.pad_half, self.pad_half))
+        cubes = list(self.objects.values())
         if self.placement_initializer is not None:
             self.placement_initializer.reset()
             self.placement_initializer.add_objects(cubes)
@@ -97,16 +137,23 @@ class StackCubes(SubgoalManipulationEnv):
     def _reset_internal(self):
         super()._reset_internal()
         self._reset_objects()
-        self._move_location("target", (self.rng.uniform(*self.pad_x_range), self.rng.uniform(*self.pad_y_range)))
+        for pad, strip in zip(self.pads, self._pad_strips()):
+            self._move_location(pad, (self.rng.uniform(*self.pad_x_range), self.rng.uniform(*strip)))
 
     def _setup_observables(self):
         observables = super()._setup_observables()
-        observables.update(self._object_sensors(["red", "green"], with_quat=True))
-        observables.update(self._location_sensors(["target"]))
-        observables.update(self._eef_to_sensors(["red", "green"]))
+        observables.update(self._object_sensors(list(self.cubes), with_quat=True))
+        observables.update(self._location_sensors(list(self.pads)))
+        observables.update(self._eef_to_sensors(list(self.cubes)))
         return observables
 
+    def is_stacked(self, contacts: set | None = None) -> bool:
+        """The bottom cube on some pad and every other cube on the one below it, all released."""
+        contacts = self.contacts() if contacts is None else contacts
+        bottom, *upper = self.cubes
+        return (any(self.is_placed_on(bottom, pad, contacts) for pad in self.pads)
+                and all(self.is_placed_on(c, below, contacts) for below, c in zip(self.cubes, upper)))
+
     def _check_success(self) -> bool:
-        """Red on the pad, green on red, both released."""
-        contacts = self.contacts()
-        return self.is_placed_on("red", "target", contacts) and self.is_placed_on("green", "red", contacts)
+        """The stack, in the catalogue's order, on a pad."""
+        return self.is_stacked()

@@ -23,3 +23,95 @@ def test_stack_cubes_success_needs_the_right_order(arm_env, put, achieved):
     got = achieved(e)
     assert not t._check_success() and t.reward() == 0.0
     assert got["place_green_on_target"] and got["place_red_on_green"] and not got["place_red_on_target"]
+
+
+@pytest.fixture(scope="module")
+def stack_three(tmp_path_factory):
+    """The worked example of docs/arms.md, its catalogue and spec written as the page shows them:
+    -> (catalogue path, spec path)."""
+    import re
+    from pathlib import Path
+
+    page = (Path(__file__).resolve().parents[3] / "docs" / "arms.md").read_text(encoding="utf-8")
+    catalogue, spec = re.findall(r"^```yaml\n(.*?)^```", page, flags=re.S | re.M)[:2]
+    folder = tmp_path_factory.mktemp("arms")
+    (folder / "stack_three.yaml").write_text(catalogue)
+    (folder / "stack_three-spec.yaml").write_text(spec)
+    return folder / "stack_three.yaml", folder / "stack_three-spec.yaml"
+
+
+def test_a_catalogue_adds_a_cube_colour_and_a_pad(put, stack_three):
+    """The user-written StackThree: three cubes in the catalogue's order on either of two pads, the
+    pads in strips of their own."""
+    from hubsgo_ppl.envs.robosuite import make_robosuite_task
+
+    env = make_robosuite_task(str(stack_three[0]))
+    try:
+        env.reset(seed=3)
+        t = env.unwrapped.task
+        assert t.cubes == ("red", "green", "blue") and t.pads == ("pad_a", "pad_b")
+        assert env.observation_space.shape == (9 + 3 * 7 + 2 * 3 + 3 * 3,)
+        a, b = (t.place_top(p) for p in t.pads)
+        assert -0.11 - 1e-9 <= a[1] <= -0.05 + 1e-9 and 0.05 - 1e-9 <= b[1] <= 0.11 + 1e-9
+        for pad in (a, b):
+            put(env, "red", pad + [0, 0, 0.02])
+            put(env, "green", pad + [0, 0, 0.06])
+            put(env, "blue", pad + [0.25, 0.0, 0.02])
+            assert not t._check_success()                       # two of three
+            put(env, "blue", pad + [0, 0, 0.10])
+            assert t._check_success() and t.reward() == 1.0     # on pad_a, then on pad_b
+        put(env, "blue", b + [0, 0, 0.02])                      # wrong order: blue at the bottom
+        put(env, "red", b + [0, 0, 0.06])
+        put(env, "green", b + [0, 0, 0.10])
+        assert not t._check_success()
+    finally:
+        env.close()
+
+
+def test_a_three_cube_stack_is_three_place_options(stack_three):
+    """The scripted low level builds the user-written three-cube stack with three place options, the
+    third cube lowered onto the two-cube stack without knocking it down."""
+    from hubsgo_ppl.agents.scripted_osc import ScriptedOSC
+    from hubsgo_ppl.envs.robosuite import make_robosuite_task
+
+    env = make_robosuite_task(str(stack_three[0]))
+    try:
+        env.reset(seed=0)
+        names, ctrl = env.unwrapped.subgoal_names, ScriptedOSC()
+        for goal in ("place_red_on_pad_b", "place_green_on_red", "place_blue_on_green"):
+            i = names.index(goal)
+            for _ in range(120):
+                *_, info = env.step(ctrl.act(env, i))
+                if info["subgoals"][i]:
+                    break
+            assert info["subgoals"][i], goal
+        assert info["is_success"]
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("option, value, message", [
+    ("cubes", "[red, pink]", r"options.cubes: \['red', 'pink'\] is not 1 to 4 distinct colours"),
+    ("cubes", "[red, red]", r"options.cubes: \['red', 'red'\] is not 1 to 4 distinct colours"),
+    ("pads", "[pad_a, pad_a]", r"options.pads: \['pad_a', 'pad_a'\] is not 1 to 3 distinct names"),
+    ("pads", "[red]", r"options.pads: \['red'\] is not 1 to 3 distinct names"),
+    ("pads", "[a, b, c, d]", r"options.pads: \['a', 'b', 'c', 'd'\] is not 1 to 3"),
+])
+def test_bad_stack_options_name_the_problem(tmp_path, stack_three, option, value, message):
+    from hubsgo_ppl.envs.robosuite import make_robosuite_task
+    from hubsgo_ppl.specs import SpecError
+
+    text = stack_three[0].read_text()
+    line = next(x for x in text.splitlines() if x.strip().startswith(f"{option}:"))
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(text.replace(line, f"  {option}: {value}"))
+    with pytest.raises(SpecError, match=message):
+        make_robosuite_task(str(bad))
+
+
+def test_the_worked_example_and_its_spec_pass_hubsgo_tasks(stack_three, capsys):
+    from hubsgo_ppl.cli import main
+
+    catalogue, spec = stack_three
+    assert main(["tasks", str(catalogue), "--model", str(spec)]) == 0
+    assert "critic spec 'stack_three-spec': 9 sub-goals, 10 edges" in capsys.readouterr().out
