@@ -26,18 +26,17 @@ def test_stack_cubes_success_needs_the_right_order(arm_env, put, achieved):
 
 
 @pytest.fixture(scope="module")
-def stack_three(tmp_path_factory):
-    """The worked example of docs/arms.md, its catalogue and spec written as the page shows them:
-    -> (catalogue path, spec path)."""
+def stack_three():
+    """The worked example of docs/arms.md (examples/arms), whose catalogue and spec the page shows as
+    they are: -> (catalogue path, spec path)."""
     import re
     from pathlib import Path
 
-    page = (Path(__file__).resolve().parents[3] / "docs" / "arms.md").read_text(encoding="utf-8")
-    catalogue, spec = re.findall(r"^```yaml\n(.*?)^```", page, flags=re.S | re.M)[:2]
-    folder = tmp_path_factory.mktemp("arms")
-    (folder / "stack_three.yaml").write_text(catalogue)
-    (folder / "stack_three-spec.yaml").write_text(spec)
-    return folder / "stack_three.yaml", folder / "stack_three-spec.yaml"
+    root = Path(__file__).resolve().parents[3]
+    paths = root / "examples" / "arms" / "stack_three.yaml", root / "examples" / "arms" / "stack_three-spec.yaml"
+    page = (root / "docs" / "arms.md").read_text(encoding="utf-8")
+    assert re.findall(r"^```yaml\n(.*?)^```", page, flags=re.S | re.M)[:2] == [p.read_text() for p in paths]
+    return paths
 
 
 def test_a_catalogue_adds_a_cube_colour_and_a_pad(put, stack_three):
