@@ -63,9 +63,9 @@ def test_a_user_written_arm_task_trains_on_the_family_defaults(tmp_path):
     nothing else: the learned low level, the robosuite family's settings."""
     from pathlib import Path
 
-    fixtures = Path(__file__).resolve().parents[1] / "fixtures"
+    arms = Path(__file__).resolve().parents[2] / "examples" / "arms"
     run = tmp_path / "push_four"
-    assert main(["train", str(fixtures / "push_four.yaml"), "--model", str(fixtures / "push_four-spec.yaml"),
+    assert main(["train", str(arms / "push_four.yaml"), "--model", str(arms / "push_four-spec.yaml"),
                  "--low-level", "learned", "--steps", "80", "--seed", "0", "--out", str(run), "--no-progress",
                  "--set", "env.horizon=40", "--set", "low.learning_starts=32"]) == 0
     rows = _metrics(run)

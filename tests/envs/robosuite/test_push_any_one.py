@@ -71,7 +71,7 @@ def test_a_catalogue_adds_a_cube_colour_and_its_pad(tmp_path):
     from hubsgo_ppl.envs.robosuite import make_robosuite_task
     from hubsgo_ppl.specs import SpecError
 
-    fixture = Path(__file__).resolve().parents[2] / "fixtures" / "push_four.yaml"
+    fixture = Path(__file__).resolve().parents[3] / "examples" / "arms" / "push_four.yaml"
     env = make_robosuite_task(str(fixture))
     try:
         env.reset(seed=1)

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import re
+from pathlib import Path
+
 import pytest
 
 pytestmark = pytest.mark.mujoco
@@ -25,18 +28,13 @@ def test_stack_cubes_success_needs_the_right_order(arm_env, put, achieved):
     assert got["place_green_on_target"] and got["place_red_on_green"] and not got["place_red_on_target"]
 
 
+ARMS = Path(__file__).resolve().parents[3] / "examples" / "arms"
+
+
 @pytest.fixture(scope="module")
 def stack_three():
-    """The worked example of docs/arms.md (examples/arms), whose catalogue and spec the page shows as
-    they are: -> (catalogue path, spec path)."""
-    import re
-    from pathlib import Path
-
-    root = Path(__file__).resolve().parents[3]
-    paths = root / "examples" / "arms" / "stack_three.yaml", root / "examples" / "arms" / "stack_three-spec.yaml"
-    page = (root / "docs" / "arms.md").read_text(encoding="utf-8")
-    assert re.findall(r"^```yaml\n(.*?)^```", page, flags=re.S | re.M)[:2] == [p.read_text() for p in paths]
-    return paths
+    """The three-cube, two-pad example of docs/arms.md: -> (catalogue path, spec path)."""
+    return ARMS / "stack_three.yaml", ARMS / "stack_three-spec.yaml"
 
 
 def test_a_catalogue_adds_a_cube_colour_and_a_pad(put, stack_three):
@@ -108,9 +106,11 @@ def test_bad_stack_options_name_the_problem(tmp_path, stack_three, option, value
         make_robosuite_task(str(bad))
 
 
-def test_the_worked_example_and_its_spec_pass_hubsgo_tasks(stack_three, capsys):
+def test_the_worked_example_of_docs_arms_is_shipped_as_shown_and_passes_hubsgo_tasks(capsys):
     from hubsgo_ppl.cli import main
 
-    catalogue, spec = stack_three
-    assert main(["tasks", str(catalogue), "--model", str(spec)]) == 0
-    assert "critic spec 'stack_three-spec': 9 sub-goals, 10 edges" in capsys.readouterr().out
+    paths = ARMS / "stack_two_pads.yaml", ARMS / "stack_two_pads-spec.yaml"
+    page = (ARMS.parents[1] / "docs" / "arms.md").read_text(encoding="utf-8")
+    assert re.findall(r"^```yaml\n(.*?)^```", page, flags=re.S | re.M)[:2] == [p.read_text() for p in paths]
+    assert main(["tasks", str(paths[0]), "--model", str(paths[1])]) == 0
+    assert "critic spec 'stack_two_pads-spec': 9 sub-goals, 10 edges" in capsys.readouterr().out
