@@ -12,7 +12,6 @@ from .base import CLOSED, COLOURS, SubgoalKind, SubgoalManipulationEnv, colour_o
 __all__ = ["PushAnyOne"]
 
 
-
 class PushAnyOne(SubgoalManipulationEnv):
     """
     ## Description

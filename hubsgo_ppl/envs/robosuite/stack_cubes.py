@@ -55,7 +55,8 @@ class StackCubes(SubgoalManipulationEnv):
     cyan, the bottom of the stack first; the task is solved when they stand in that order on a pad.
     ``pads`` (default ``[target]``): the names of one to three pads, any of which may carry the stack;
     with more than one, each pad's centre is drawn in its own strip of y. A place option's route rises
-    to its target's height before it crosses, so a cube carried onto a stack clears it. The observation grows by 13 per extra cube (position, quaternion, hand-to-cube) and 3 per pad.
+    to its target's height before it crosses, so a cube carried onto a stack clears it. The observation
+    grows by 10 per extra cube (position, quaternion, hand-to-cube) and 3 per extra pad.
 
     ## Sub-goal catalogue (``envs/stack_cubes.yaml``)
 
