@@ -7,8 +7,7 @@ from robosuite.models.objects import BoxObject
 from robosuite.models.tasks import ManipulationTask
 from robosuite.utils.placement_samplers import UniformRandomSampler
 
-from ...specs import SpecError
-from .base import COLOURS, SubgoalManipulationEnv, colour_option
+from .base import COLOURS, SubgoalManipulationEnv, colour_option, listed_option
 
 __all__ = ["StackCubes"]
 
@@ -95,23 +94,18 @@ class StackCubes(SubgoalManipulationEnv):
         """``cubes`` (a catalogue option): the colours, bottom of the stack first; ``pads``: the names of
         the pads a stack may stand on."""
         self.cubes = colour_option(catalogue, "cubes", cubes, self.max_cubes)
-        self.pads = self._pad_names(catalogue, pads)
+        self.pads = listed_option(catalogue, "pads", pads, self.max_pads,
+                                  lambda p: isinstance(p, str) and p.isidentifier() and p not in COLOURS,
+                                  "names (letters, digits, _; not a cube colour), e.g. [target]")
+        self.pad_strips = self._strips(len(self.pads))
         super().__init__(catalogue, *args, **kwargs)
 
-    def _pad_names(self, catalogue, pads) -> tuple[str, ...]:
-        pads = tuple(pads) if isinstance(pads, (list, tuple)) else (pads,)
-        ok = all(isinstance(p, str) and p.isidentifier() and p not in COLOURS for p in pads)
-        if not ok or not 1 <= len(pads) <= self.max_pads or len(set(pads)) != len(pads):
-            raise SpecError(f"{getattr(catalogue, 'source', 'catalogue')}: options.pads: {list(pads)} is not 1 to "
-                            f"{self.max_pads} distinct names (letters, digits, _; not a cube colour), e.g. [target]")
-        return pads
-
-    def _pad_strips(self) -> list[tuple[float, float]]:
+    def _strips(self, n: int) -> list[tuple[float, float]]:
         """The y range of each pad's centre: the default range for one pad, else equal strips of
         [-0.16, 0.16] less the pad's half width and 1 cm, so no two pads touch."""
-        if len(self.pads) == 1:
+        if n == 1:
             return [self.pad_y_range]
-        edges = np.linspace(-0.16, 0.16, len(self.pads) + 1)
+        edges = np.linspace(-0.16, 0.16, n + 1)
         gap = self.pad_half + 0.01
         return [(float(lo + gap), float(hi - gap)) for lo, hi in zip(edges[:-1], edges[1:])]
 
@@ -120,7 +114,7 @@ class StackCubes(SubgoalManipulationEnv):
         self.objects = {c: BoxObject(name=c, size=[self.cube_half] * 3, rgba=list(COLOURS[c]),
                                      friction=self.cube_friction) for c in self.cubes}
         self.locations = {}
-        for pad, (lo, hi) in zip(self.pads, self._pad_strips()):
+        for pad, (lo, hi) in zip(self.pads, self.pad_strips):
             self._add_location(arena, pad, (sum(self.pad_x_range) / 2, (lo + hi) / 2), rgba=(0.5, 0.5, 0.5, 1),
                                half_size=(self.pad_half, self.pad_half))
         cubes = list(self.objects.values())
@@ -138,7 +132,7 @@ class StackCubes(SubgoalManipulationEnv):
     def _reset_internal(self):
         super()._reset_internal()
         self._reset_objects()
-        for pad, strip in zip(self.pads, self._pad_strips()):
+        for pad, strip in zip(self.pads, self.pad_strips):
             self._move_location(pad, (self.rng.uniform(*self.pad_x_range), self.rng.uniform(*strip)))
 
     def _setup_observables(self):
