@@ -9,6 +9,7 @@ Registration is explicit (no import side effects, cf. MiniGrid #455)::
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -82,11 +83,24 @@ def get_task(name_or_path: str | Path) -> TaskInfo:
         cat = load_catalogue(p)
         return TaskInfo(cat.task, _env_id(cat), cat.family, p)
     known = tasks()
-    if str(name_or_path) not in known:
+    name = str(name_or_path)
+    if name not in known:
+        ours = [info.name for info in known.values() if info.env_id == name]
+        if ours:
+            raise UnknownTaskError(f"{name!r} is the Gymnasium id of task {ours[0]!r}: pass {ours[0]}")
+        if _GYM_ID.fullmatch(name):
+            raise UnknownTaskError(
+                f"{name!r} is a Gymnasium id, not a task: write a catalogue that names it and lists the sub-goals "
+                "to learn (family minigrid with options.gym_id for MiniGrid's environments, docs/minigrid.md; "
+                "family gym for any other, docs/own_env.md), and pass the catalogue's path")
         raise UnknownTaskError(
-            f"unknown task {str(name_or_path)!r}; use one of: {', '.join(sorted(known))} "
+            f"unknown task {name!r}; use one of: {', '.join(sorted(known))} "
             f"(`hubsgo tasks` lists them), or a path to a catalogue .yaml")
-    return known[str(name_or_path)]
+    return known[name]
+
+
+#: a Gymnasium environment id (``[namespace/]Name-vN``), as ``gymnasium.make`` takes it
+_GYM_ID = re.compile(r"(?:[\w.-]+/)?[\w.:-]+-v\d+")
 
 
 _registered = False

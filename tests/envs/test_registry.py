@@ -53,6 +53,18 @@ def test_unknown_task_lists_the_known_ones():
     assert isinstance(exc.value, SpecError)
 
 
+@pytest.mark.parametrize("name, expected", [
+    ("hubsgo/KeyDoor-v0", "is the Gymnasium id of task 'keydoor': pass keydoor"),
+    ("MiniGrid-Unlock-v0", "'MiniGrid-Unlock-v0' is a Gymnasium id, not a task: write a catalogue"),
+    ("ALE/Pong-v5", "family gym for any other, docs/own_env.md"),
+])
+def test_a_gymnasium_id_in_place_of_a_task_says_what_to_pass(name, expected):
+    with pytest.raises(UnknownTaskError) as exc:
+        T.get_task(name)
+    assert expected in str(exc.value) and "\n" not in str(exc.value)
+    assert "use one of" not in str(exc.value)
+
+
 def test_user_catalogue_in_a_temp_folder(tmp_path):
     (tmp_path / "corridor.txt").write_text("; a user maze\n#########\n#A..a...#\n#....#.G#\n#########\n")
     (tmp_path / "corridor.yaml").write_text(textwrap.dedent("""\
