@@ -11,7 +11,7 @@ A sweep file (``sweeps/*.yaml``) is validated into :class:`SweepSpec`::
       - {name: keydoor, steps: 60000}
     variants:                     # the table's rows
       - {name: hubsgo-specific, label: "HUBS-GO (specific correlations)", agent: hubsgo, model: "{task}-specific"}
-      - {name: hubsgo-fully_connected, agent: hubsgo, graph: fully_connected}
+      - {name: hubsgo-independent, agent: hubsgo, graph: independent}     # the spec with a preset graph
       - {name: hdqn-incorrect, agent: hdqn, task: "{task}_incorrect"}     # Table 2: another env, same column
       - {name: td3, agent: td3, tasks: [stack_cubes]}                       # only some columns
 

@@ -118,7 +118,12 @@ def test_critic_specs_match_the_catalogue(task):
         g = SubgoalGraph(names, [(u, v, signs[s]) for u, v, s in spec["edges"]]).preset(graph)
         assert g.n == len(names)
     assert specs["independent"]["edges"] == []
-    assert specs["fully_connected"]["edges"] == specs["specific"]["edges"]
+    # the paper's fully connected setting: every pair coupled, no sign given (no knowledge beyond the list)
+    assert specs["fully_connected"]["edges"] == []
+    full = SubgoalGraph(names, []).preset("fully_connected")
+    assert full.num_edges == len(names) * (len(names) - 1) // 2 and not full.edge_sign.any()
+    assert {k: specs["fully_connected"][k] for k in ("prior", "likelihood", "inference")} == {
+        k: specs["specific"][k] for k in ("prior", "likelihood", "inference")}
     touched = {n for e in specs["specific"]["edges"] for n in e[:2]}
     assert touched == {n for n in names if not n.startswith("corner_")}
 
