@@ -79,7 +79,7 @@ class SubgoalGraph:
             raise KeyError(f"{name!r} is not a sub-goal; use one of: {', '.join(self.names)}") from None
 
     def preset(self, kind: str) -> "SubgoalGraph":
-        """The graph under one of the paper's knowledge settings (Sec. 4.1).
+        """The graph under one of the paper's knowledge settings (Sec. 4.3).
 
         ``specific``: the edges as given; ``fully_connected``: every pair, keeping a given edge's sign
         and 0 (unknown) elsewhere; ``independent``: no edges (the Bernoulli special case of Sec. 3.3).
