@@ -52,6 +52,9 @@ def _env_id(cat: Catalogue) -> str:
     return f"hubsgo/{camel}-v0"
 
 
+#: a Gymnasium environment id (``[namespace/]Name-vN``), as ``gymnasium.make`` takes it
+_GYM_ID = re.compile(r"(?:[\w.-]+/)?[\w.:-]+-v\d+")
+
 _CACHE: dict[tuple, dict[str, TaskInfo]] = {}
 
 
@@ -85,9 +88,9 @@ def get_task(name_or_path: str | Path) -> TaskInfo:
     known = tasks()
     name = str(name_or_path)
     if name not in known:
-        ours = [info.name for info in known.values() if info.env_id == name]
-        if ours:
-            raise UnknownTaskError(f"{name!r} is the Gymnasium id of task {ours[0]!r}: pass {ours[0]}")
+        ours = next((info.name for info in known.values() if info.env_id == name), None)
+        if ours is not None:
+            raise UnknownTaskError(f"{name!r} is the Gymnasium id of task {ours!r}: pass {ours}")
         if _GYM_ID.fullmatch(name):
             raise UnknownTaskError(
                 f"{name!r} is a Gymnasium id, not a task: write a catalogue that names it and lists the sub-goals "
@@ -97,10 +100,6 @@ def get_task(name_or_path: str | Path) -> TaskInfo:
             f"unknown task {name!r}; use one of: {', '.join(sorted(known))} "
             f"(`hubsgo tasks` lists them), or a path to a catalogue .yaml")
     return known[name]
-
-
-#: a Gymnasium environment id (``[namespace/]Name-vN``), as ``gymnasium.make`` takes it
-_GYM_ID = re.compile(r"(?:[\w.-]+/)?[\w.:-]+-v\d+")
 
 
 _registered = False
