@@ -110,8 +110,8 @@ from pydantic import Field, field_validator, model_validator  # noqa: E402
 # Pyro, so the validators below import them when they run, not when this module loads.
 from .infer.config import InferenceSpec  # noqa: E402
 
-__all__ += ["ComponentSpec", "DEFAULT_LIKELIHOOD", "DEFAULT_PRIOR", "InferenceSpec", "ModelSpec", "load_model_spec",
-            "list_model_specs", "match_subgoals"]
+__all__ += ["ComponentSpec", "DEFAULT_LIKELIHOOD", "DEFAULT_PRIOR", "FAMILY_LIKELIHOOD", "InferenceSpec", "ModelSpec",
+            "for_family", "load_model_spec", "list_model_specs", "match_subgoals"]
 
 EdgeSign = Literal["positive", "negative", "unknown"]
 
@@ -132,6 +132,10 @@ class ComponentSpec(BaseModel):
 # that recent successful episodes achieved, and q starts at the prior.
 DEFAULT_PRIOR = {"name": "ising", "strength": 3.0, "field": -2.0}
 DEFAULT_LIKELIHOOD = {"name": "outcome", "flip": 0.02}
+#: a task family's own likelihood for a spec that leaves it out (:func:`for_family`): on the arm tasks
+#: the successes speak at full weight, as every shipped arm spec states (docs/results.md, "How strongly
+#: the successes speak"); there an option is a whole pick-and-place, not one cell of a route
+FAMILY_LIKELIHOOD = {"robosuite": {"name": "outcome", "flip": 0.02, "power": 1.0}}
 
 
 #: the sizes a prior's or likelihood's number may take (or 0): the critic computes in float32, where
@@ -176,10 +180,11 @@ def _numbers_in_range(kind: str, v: ComponentSpec) -> ComponentSpec:
 class ModelSpec(StrictModel):
     """A critic spec; see models/example-specific.yaml.
 
-    Left out, ``prior`` and ``likelihood`` are :data:`DEFAULT_PRIOR` and :data:`DEFAULT_LIKELIHOOD`,
-    and ``inference.init`` is ``prior`` where the guide can start at the prior (it has natural
-    parameters, as bernoulli and ising do), ``edges`` otherwise; every other inference setting keeps
-    its :class:`InferenceSpec` default.
+    Left out, ``prior`` and ``likelihood`` are :data:`DEFAULT_PRIOR` and :data:`DEFAULT_LIKELIHOOD`
+    (a run then gives the likelihood of its task's family, :func:`for_family`), and ``inference.init``
+    is ``prior`` where the guide can start at the prior (it has natural parameters, as bernoulli and
+    ising do), ``edges`` otherwise; every other inference setting keeps its :class:`InferenceSpec`
+    default.
     """
 
     spec_kind: ClassVar[str] = "critic spec"
@@ -277,6 +282,15 @@ def match_subgoals(spec: ModelSpec, names: list[str], source: str) -> ModelSpec:
     if list(spec.subgoals) == list(names):
         return spec
     return spec.model_copy(update={"subgoals": list(names)})
+
+
+def for_family(spec: ModelSpec, family: str) -> ModelSpec:
+    """``spec`` for a task of ``family``: where the spec leaves its likelihood out and the family has its
+    own (:data:`FAMILY_LIKELIHOOD`), that one; a likelihood the spec states is always kept."""
+    own = FAMILY_LIKELIHOOD.get(family)
+    if own is None or "likelihood" in spec.model_fields_set:
+        return spec
+    return spec.model_copy(update={"likelihood": ComponentSpec(**own)})
 
 
 def list_model_specs() -> list[str]:

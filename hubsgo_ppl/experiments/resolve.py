@@ -108,7 +108,7 @@ def resolve_run(cfg: RunConfig) -> ResolvedRun:
         raise RunError(f"--graph {cfg.graph} sets the critic's graph, and agent {cfg.agent!r} has no critic; "
                        "drop --graph, or train --agent hubsgo")
     if cfg.agent == "hubsgo" or cfg.model is not None:
-        from ..specs import ModelSpec, SpecError, list_model_specs, load_model_spec, match_subgoals
+        from ..specs import ModelSpec, SpecError, for_family, list_model_specs, load_model_spec, match_subgoals
 
         model = cfg.model or f"{info.name}-specific"
         missing = cfg.model is None and model not in list_model_specs()
@@ -133,6 +133,7 @@ def resolve_run(cfg: RunConfig) -> ResolvedRun:
                   file=sys.stderr)
         else:
             spec = load_model_spec(model, graph=cfg.graph)
+        spec = for_family(spec, info.family)        # a likelihood left out: the family's own
         source = f"model spec {model!r} for task {info.name!r}"
         if set(spec.subgoals) >= set(names):
             spec = match_subgoals(spec, list(names), source)

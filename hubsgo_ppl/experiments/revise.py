@@ -75,9 +75,9 @@ REVISION_FIELDS = ("revision", "env_steps", "episode", "spec_before", "spec_afte
 def load_revision_spec(spec: str | Path, resolved: dict[str, Any]):
     """The revised spec, validated, its sub-goals checked against the run's task catalogue and put in
     its order. Refuses (SpecError, one line) a sub-goal the catalogue does not define."""
-    from ..specs import load_model_spec
+    from ..specs import for_family, load_model_spec
 
-    new = load_model_spec(spec)
+    new = for_family(load_model_spec(spec), resolved["family"])
     catalogue = list(get_task(resolved["task_ref"]).catalogue.names)
     check_subset(new.subgoals, catalogue, f"{spec} (for task {resolved['task']!r})")
     return new.model_copy(update={"subgoals": catalogue_order(new.subgoals, catalogue)})

@@ -6,6 +6,7 @@ import re
 from pathlib import Path
 
 import pytest
+import yaml
 
 pytestmark = pytest.mark.mujoco
 
@@ -114,3 +115,31 @@ def test_the_worked_example_of_docs_arms_is_shipped_as_shown_and_passes_hubsgo_t
     assert re.findall(r"^```yaml\n(.*?)^```", page, flags=re.S | re.M)[:2] == [p.read_text() for p in paths]
     assert main(["tasks", str(paths[0]), "--model", str(paths[1])]) == 0
     assert "critic spec 'stack_two_pads-spec': 9 sub-goals, 10 edges" in capsys.readouterr().out
+
+
+def test_an_arm_spec_that_leaves_out_the_likelihood_reads_the_successes_at_full_weight(tmp_path):
+    """The robosuite family's likelihood (power 1, as every shipped arm spec states) for a user's spec
+    without one and for --graph independent; a stated likelihood is kept, and a maze keeps power 0.25."""
+    from hubsgo_ppl.experiments.resolve import resolve
+    from hubsgo_ppl.experiments.run import RunConfig
+    from hubsgo_ppl.infer.likelihoods import get_likelihood
+
+    def power(task, **kw):
+        lik = dict(resolve(RunConfig(task=str(task), agent="hubsgo", **kw))["model_spec"]["likelihood"])
+        return get_likelihood(lik.pop("name"), **lik).power
+
+    catalogue, spec = ARMS / "stack_two_pads.yaml", ARMS / "stack_two_pads-spec.yaml"
+    assert "likelihood" not in spec.read_text()
+    assert power(catalogue, model=str(spec)) == 1.0
+    assert power(catalogue, graph="independent") == 1.0
+    from hubsgo_ppl.experiments.revise import load_revision_spec     # a revision's spec: the same
+    run = {"task": "stack_two_pads", "task_ref": str(catalogue), "family": "robosuite"}
+    assert load_revision_spec(spec, run).likelihood.params() == {"flip": 0.02, "power": 1.0}
+    stated = tmp_path / "stated.yaml"
+    stated.write_text(spec.read_text() + "likelihood: {name: outcome, flip: 0.02, power: 0.5}\n")
+    assert power(catalogue, model=str(stated)) == 0.5
+    assert power("keydoor", graph="independent") == 0.25
+    maze = tmp_path / "maze.yaml"           # the same spec file shape on a maze: the maze default
+    shipped = yaml.safe_load((ARMS.parents[1] / "models" / "keydoor-specific.yaml").read_text())
+    maze.write_text(yaml.safe_dump({k: shipped[k] for k in ("name", "subgoals", "edges")}))
+    assert power("keydoor", model=str(maze)) == 0.25
