@@ -48,7 +48,8 @@ class SubgoalFilter(Protocol):
         """Learn from one high-level minibatch; returns scalars to log."""
 
     def end_episode(self, visited: np.ndarray, success: bool) -> None:
-        """An episode ended; ``visited`` (N,) bool: the sub-goals achieved at any step of it."""
+        """An episode ended; ``visited`` (N,) bool: the sub-goals it achieved, at any step of it (those
+        its env marks lasting, ``subgoal_lasting``: where they hold at its end)."""
 
     def state_dict(self) -> dict[str, Any]: ...
 

@@ -53,6 +53,11 @@ class HRLLoop:
         self.seed = seed
         self.rng = stream_rng(seed, LOOP_STREAM)
         self.names: list[str] = list(env.unwrapped.subgoal_names)
+        # the sub-goals a success counts only where they hold at its end (an env's optional
+        # ``subgoal_lasting``: where an arm task's objects rest); every other one where it held at any step
+        lasting = getattr(env.unwrapped, "subgoal_lasting", None)
+        self._lasting = (np.asarray(lasting(), dtype=bool) if callable(lasting)
+                         else np.zeros(len(self.names), dtype=bool))
         self.env_steps = 0
         self.episodes = 0
         self._explore = LinearSchedule(config.explore_start, config.explore_end, config.explore_fraction)
@@ -212,7 +217,7 @@ class HRLLoop:
                         tally.record(learned)
                         self._weigh_low_level(bool(learned))
         if train:
-            self.filter.end_episode(visited, tally.success)
+            self.filter.end_episode(np.where(self._lasting, achieved, visited), tally.success)
             self._recent.append(bool(tally.success))
             if (self.settled_step is None and cfg.settle_at is not None
                     and len(self._recent) == cfg.outcome_window

@@ -389,3 +389,34 @@ def test_the_loop_logs_every_option_with_its_start_and_outcome():
         assert all(0 < o["steps"] <= 6 for o in stats.option_log)
         assert not any(o["goal"] in o["from"] for o in stats.option_log)     # achieved sub-goals are not offered
         assert "option_log" not in stats.row()
+
+
+def test_a_success_counts_a_lasting_subgoal_only_where_it_holds_at_the_end():
+    """An env's ``subgoal_lasting`` marks states a success keeps (an arm task's placements): the filter
+    hears them as they are when the episode succeeds, every other sub-goal as achieved at any step.
+    FourRoom's doorways, marked lasting here, are crossed on the way and left by the end."""
+    from hubsgo_ppl.experiments.resolve import resolve_hyper
+
+    register()
+    hyper = resolve_hyper("minigrid", "fourroom", "hdqn", [], steps=3000, low_level="scripted")
+
+    def heard(lasting):
+        env = make("fourroom")
+        if lasting is not None:
+            env.unwrapped.subgoal_lasting = lambda: lasting
+        loop = build_agent("hdqn", env, hyper, seed=0)
+        loop.filter = f = FixedSetFilter(np.ones(len(loop.names), dtype=bool))
+        ends = []
+        while len(ends) < 8:
+            loop.run_episode(train=True)
+            ends.append(env.unwrapped.subgoal_achieved().copy())    # the state the episode ended in
+        return loop.names, [(v, s, e) for (v, s), e in zip(f.ended, ends) if s]
+
+    names, plain = heard(None)
+    doors = np.array([n != "goal" for n in names])
+    assert plain and all(v[~doors].all() and v[doors].any() for v, _, _ in plain)   # crossed on the way
+    _, marked = heard(doors)
+    assert len(marked) == len(plain)            # the same seed: the same episodes
+    for v, _, end in marked:
+        assert not end[doors].any()
+        assert not v[doors].any() and v[names.index("goal")]

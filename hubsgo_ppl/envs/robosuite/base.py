@@ -90,12 +90,15 @@ class SubgoalKind:
     ``args`` maps an argument name to its type: ``"object"`` (a movable object of the task),
     ``"place"`` (an object or a fixed location), ``"location"`` or ``"float"``; ``defaults`` holds the
     optional ones. ``achieved(args, contacts) -> bool`` and ``target(args, contacts) -> (xyz, g)``.
+    ``lasting``: the predicate is a state of the scene that a success keeps (where an object rests), not
+    a step on the way (where the hand is, what it holds); see :meth:`SubgoalManipulationEnv.subgoal_lasting`.
     """
 
     args: dict[str, str]
     achieved: Callable[[dict[str, Any], set], bool]
     target: Callable[[dict[str, Any], set], tuple[np.ndarray, float]]
     defaults: dict[str, Any] = field(default_factory=dict)
+    lasting: bool = False
 
 
 @dataclass(frozen=True)
@@ -336,7 +339,7 @@ class SubgoalManipulationEnv(ManipulationEnv):
                                        self._reach_above_target, defaults={"height": self.hover_height}),
             "grasp": SubgoalKind({"object": "object"}, self._grasp_achieved, self._grasp_target),
             "place_on": SubgoalKind({"object": "object", "onto": "place"}, self._place_on_achieved,
-                                    self._place_on_target),
+                                    self._place_on_target, lasting=True),
         }
 
     def _reach_above_point(self, args) -> np.ndarray:
@@ -426,6 +429,12 @@ class SubgoalManipulationEnv(ManipulationEnv):
         """Achievement of every catalogue sub-goal on the current state, ``bool`` array (N,)."""
         contacts = self.contacts()
         return np.array([self._kinds[sg.kind].achieved(sg.args, contacts) for sg in self._subgoals], dtype=bool)
+
+    def subgoal_lasting(self) -> np.ndarray:
+        """Which sub-goals are lasting states of the scene (``SubgoalKind.lasting``), ``bool`` array (N,).
+        A successful episode is evidence for such a sub-goal only where it still holds at the success:
+        a cube placed on one pad and then moved to another was not placed on the first in the end."""
+        return np.array([self._kinds[sg.kind].lasting for sg in self._subgoals], dtype=bool)
 
     def subgoal_target(self, index: int) -> tuple[np.ndarray, float]:
         """Target of sub-goal ``index`` on the current state: (end-effector xyz, gripper in [-1, 1])."""

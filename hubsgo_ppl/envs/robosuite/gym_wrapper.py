@@ -53,6 +53,9 @@ class RobosuiteTaskEnv(gym.Env):
     def subgoal_achieved(self) -> np.ndarray:
         return self.task.subgoal_achieved()
 
+    def subgoal_lasting(self) -> np.ndarray:
+        return self.task.subgoal_lasting()
+
     def subgoal_target(self, index: int) -> tuple[np.ndarray, float]:
         return self.task.subgoal_target(index)
 

@@ -144,7 +144,8 @@ class PushAnyOne(SubgoalManipulationEnv):
     def _subgoal_kinds(self) -> dict[str, SubgoalKind]:
         kinds = super()._subgoal_kinds()
         kinds["push_to"] = SubgoalKind({"object": "object", "to": "location"},
-                                       lambda a, c: self.is_pushed_to(a["object"], a["to"], c), self._push_target)
+                                       lambda a, c: self.is_pushed_to(a["object"], a["to"], c), self._push_target,
+                                       lasting=True)
         return kinds
 
     def _push_leg(self, cube: np.ndarray, pad: np.ndarray) -> tuple[int, np.ndarray] | None:

@@ -143,3 +143,13 @@ def test_an_arm_spec_that_leaves_out_the_likelihood_reads_the_successes_at_full_
     shipped = yaml.safe_load((ARMS.parents[1] / "models" / "keydoor-specific.yaml").read_text())
     maze.write_text(yaml.safe_dump({k: shipped[k] for k in ("name", "subgoals", "edges")}))
     assert power("keydoor", model=str(maze)) == 0.25
+
+
+def test_where_objects_rest_is_lasting_where_the_hand_is_and_what_it_holds_are_not(arm_env):
+    """``subgoal_lasting``: a success counts a placement, a push or a collected ball only where it still
+    holds at its end; a reach or a grasp wherever it held on the way."""
+    kinds = {"place_on": True, "push_to": True, "collect": True, "reach_above": False, "grasp": False}
+    for task in ("stack_cubes", "push_any_one", "collect_three_balls"):
+        env = arm_env(task).unwrapped
+        got = dict(zip(env.subgoal_names, env.subgoal_lasting()))
+        assert got == {sg.name: kinds[sg.kind] for sg in env.task._subgoals}, task
