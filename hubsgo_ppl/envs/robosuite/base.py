@@ -90,8 +90,9 @@ class SubgoalKind:
     ``args`` maps an argument name to its type: ``"object"`` (a movable object of the task),
     ``"place"`` (an object or a fixed location), ``"location"`` or ``"float"``; ``defaults`` holds the
     optional ones. ``achieved(args, contacts) -> bool`` and ``target(args, contacts) -> (xyz, g)``.
-    ``lasting``: the predicate is a state of the scene that a success keeps (where an object rests), not
-    a step on the way (where the hand is, what it holds); see :meth:`SubgoalManipulationEnv.subgoal_lasting`.
+    ``lasting``: the predicate is where an object rests, which a later option can change (a cube picked
+    up again or pushed on), not a step on the way (where the hand is, what it holds) nor a state no
+    option undoes (a ball in a bin); see :meth:`SubgoalManipulationEnv.subgoal_lasting`.
     """
 
     args: dict[str, str]

@@ -154,7 +154,7 @@ class CollectThreeBalls(SubgoalManipulationEnv):
     def _subgoal_kinds(self):
         kinds = super()._subgoal_kinds()
         kinds["collect"] = SubgoalKind({"object": "object"}, lambda a, c: self.is_collected(a["object"]),
-                                       self._collect_target, lasting=True)
+                                       self._collect_target)
         return kinds
 
     def _collect_target(self, args, contacts):
