@@ -69,6 +69,23 @@ def test_an_empty_most_probable_set_is_explained_under_the_table():
     assert "the most probable set is empty" not in format_ranking(table)
 
 
+def test_a_critic_that_never_updated_says_its_sets_are_the_priors():
+    """No success, no evidence: the table is the prior's, and the line under it says so (and not that
+    the evidence failed to outweigh the prior)."""
+    from hubsgo_ppl.cli.show import format_ranking
+    from hubsgo_ppl.experiments.checkpoint import subgoal_table
+    from hubsgo_ppl.infer.critic import SubgoalCritic
+    from hubsgo_ppl.specs import load_model_spec
+
+    critic = SubgoalCritic.from_spec(load_model_spec("keydoor-specific"), seed=0)
+    table = subgoal_table(critic, list(critic.names), num_samples=200)
+    assert table["updates"] == 0
+    last = format_ranking(table).splitlines()[-1]
+    assert last.startswith("the critic never updated: no training episode succeeded")
+    table["updates"] = 3
+    assert "never updated" not in format_ranking(table)
+
+
 @pytest.mark.parametrize("argv, needle", [
     (["train", "nope"], "unknown task 'nope'"),
     (["train", "keydoor", "--model", "fourroom-specific"], "model spec 'fourroom-specific'"),

@@ -17,7 +17,11 @@ def format_ranking(table: dict[str, Any]) -> str:
         tie = "  ≈ tie with the one above" if r.get("near_tie") and i > 1 else ""
         lines.append(f"{i:>4}  {r['prob']:>9.4f}  {exact:>8}  {{{', '.join(r['subgoals'])}}}{tie}")
     lines.append("marginals P(w=1): " + ", ".join(f"{n}={p:.2f}" for n, p in table["marginals"].items()))
-    if table["ranking"] and not table["ranking"][0]["subgoals"]:
+    if table.get("updates") == 0:
+        lines.append("the critic never updated: no training episode succeeded, so it had no evidence, and these "
+                     "sets are its prior's (your edges alone); train longer (`hubsgo train TASK --out RUN --resume "
+                     "--steps N`, N above the run's budget)")
+    elif table["ranking"] and not table["ranking"][0]["subgoals"]:
         lines.append("the most probable set is empty: no sub-goal's evidence outweighs the prior's pull towards "
                      "small sets; positive edges in the spec let in what the successes achieve: `hubsgo review RUN` "
                      "suggests them in RUN/review/suggested_spec.yaml, and `hubsgo revise RUN --model "

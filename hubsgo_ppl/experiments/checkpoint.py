@@ -125,10 +125,11 @@ def run_dir_checkpoint(run_dir: Path) -> dict[str, Any]:
 
 
 def subgoal_table(critic: Any, names: list[str], num_samples: int = G_STAR_SAMPLES, top_k: int = 5) -> dict[str, Any]:
-    """G*: the ranking of sub-goal sets from ``num_samples`` critic samples, the marginals and factors."""
+    """G*: the ranking of sub-goal sets from ``num_samples`` critic samples, the marginals and factors,
+    and the critic's number of updates (0: it never had evidence, and G* is its prior's)."""
     ranking = critic.ranking(num_samples=num_samples, top_k=top_k)
     marg = critic.marginals().detach().cpu().numpy().tolist()
-    return {"names": names, "num_samples": num_samples, "ranking": ranking,
+    return {"names": names, "num_samples": num_samples, "ranking": ranking, "updates": int(critic.num_updates),
             "marginals": dict(zip(names, marg)),
             "factors": {"unary": critic.factors()["unary"],
                         "pairwise": {f"{u}--{v}": j for (u, v), j in critic.factors()["pairwise"].items()}}}
