@@ -7,7 +7,8 @@ from robosuite.models.objects import BoxObject
 from robosuite.models.tasks import ManipulationTask
 from robosuite.utils.placement_samplers import SequentialCompositeSampler, UniformRandomSampler
 
-from .base import CLOSED, COLOURS, SubgoalKind, SubgoalManipulationEnv, colour_option
+from .base import CLOSED, SubgoalKind, SubgoalManipulationEnv
+from .options import COLOURS, colour_option
 
 __all__ = ["PushAnyOne"]
 

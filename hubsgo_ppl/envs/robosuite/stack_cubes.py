@@ -7,7 +7,8 @@ from robosuite.models.objects import BoxObject
 from robosuite.models.tasks import ManipulationTask
 from robosuite.utils.placement_samplers import UniformRandomSampler
 
-from .base import COLOURS, SubgoalManipulationEnv, colour_option, listed_option
+from .base import SubgoalManipulationEnv
+from .options import COLOURS, colour_option, listed_option
 
 __all__ = ["StackCubes"]
 
