@@ -136,3 +136,13 @@ def test_a_gym_catalogue_is_a_task_and_a_scripted_low_level_is_refused(tmp_path,
         resolve_hyper("gym", "corridor", "hubsgo", low_level="scripted")
     with pytest.raises(ConfigError, match="agent hiro sets goals in a space it knows"):
         resolve_hyper("gym", "corridor", "hiro")
+
+
+def test_shaping_without_a_potential_is_one_line_with_a_possible_fix(tmp_path, corridor, capsys):
+    from hubsgo_ppl.cli import main
+
+    path = _catalogue(tmp_path, SUBGOALS)
+    assert main(["train", str(path), "--agent", "hdqn", "--set", "low.shaping=1", "--steps", "50",
+                 "--out", str(tmp_path / "run"), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--set low.shaping=0" in err[0] and "obs_mode" not in err[0], err
