@@ -30,11 +30,15 @@ def cmd_tasks(args: argparse.Namespace) -> int:
 
 
 def _check_task(name: str, info: Any, model: str | None) -> None:
-    """What `hubsgo train` checks before a run, without training: a maze's reachability and optimum,
-    and the critic spec the run would use."""
+    """What `hubsgo train` checks before a run, without training: the env's own checks (those of
+    `hubsgo check-env`, which builds it as this does), a maze's reachability and optimum, and the
+    critic spec the run would use."""
+    from ..envs import make
     from ..experiments.run import RunConfig, resolve
 
     from ..envs.minigrid.registered import is_registered
+
+    make(name).close()         # refuses a bad option, kind or argument, as `hubsgo check-env` does
 
     if info.family == "minigrid" and not is_registered(info.catalogue):
         from ..envs.minigrid.bfs import check_reachable, optimal_steps_range

@@ -146,3 +146,17 @@ def test_shaping_without_a_potential_is_one_line_with_a_possible_fix(tmp_path, c
                  "--out", str(tmp_path / "run"), "--no-progress"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--set low.shaping=0" in err[0] and "obs_mode" not in err[0], err
+
+
+@pytest.mark.parametrize("options, fragment", [
+    ({"entry_point": "corridor_env:make_nothing", "max_episode_steps": 30}, "has no 'make_nothing'"),
+    ({"gym_id": "MountainCarContinuous-v0"}, "trains on a Discrete action space"),
+])
+@pytest.mark.parametrize("command", ["check-env", "tasks"])
+def test_tasks_refuses_the_gym_catalogues_check_env_refuses(tmp_path, corridor, capsys, options, fragment, command):
+    from hubsgo_ppl.cli import main
+
+    path = _catalogue(tmp_path, [{"name": "goal", "kind": "goal"}], **options)
+    assert main([command, str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and fragment in err[0], err
