@@ -56,6 +56,20 @@ def _flags(info: Any, n: int | None, where: str) -> list[Problem]:
     return out
 
 
+def _numbers(obs: Any) -> np.ndarray:
+    """An observation of any space as one flat float64 array (a dict's values in key order, a text's
+    bytes), so that two rollouts can be compared whatever the observation is."""
+    if isinstance(obs, dict):
+        parts = [_numbers(obs[k]) for k in sorted(obs, key=str)]
+    elif isinstance(obs, (tuple, list)) and not all(isinstance(o, (int, float, np.number)) for o in obs):
+        parts = [_numbers(o) for o in obs]
+    elif isinstance(obs, str):
+        return np.frombuffer(obs.encode(), np.uint8).astype(np.float64)
+    else:
+        return np.asarray(obs, dtype=np.float64).reshape(-1).copy()
+    return np.concatenate(parts) if parts else np.zeros(0)
+
+
 def check_env(env: gym.Env, steps: int = 50, seed: int = 0) -> list[Problem]:
     """What ``env`` lacks of the sub-goal contract, from two seeded rollouts of ``steps`` random steps
     (actions drawn from a generator of ``seed``, not from a global one). Does not close ``env``."""
@@ -84,7 +98,7 @@ def check_env(env: gym.Env, steps: int = 50, seed: int = 0) -> list[Problem]:
     for rollout in range(2):
         rng = np.random.default_rng(seed)
         obs, info = env.reset(seed=seed)
-        trace = [np.asarray(obs, dtype=np.float64).copy()]
+        trace = [_numbers(obs)]
         found = _flags(info, n, "reset")
         for _ in range(int(steps)):
             if isinstance(env.action_space, gym.spaces.Discrete):
@@ -95,13 +109,13 @@ def check_env(env: gym.Env, steps: int = 50, seed: int = 0) -> list[Problem]:
             else:
                 break
             obs, reward, terminated, truncated, info = env.step(action)
-            trace.append(np.asarray(obs, dtype=np.float64).copy())
+            trace.append(_numbers(obs))
             found += [p for p in _flags(info, n, "step") if p not in found]
             if not np.isfinite(float(reward)):
                 found.append(Problem("reward", f"a finite number is needed, got {reward!r}"))
             if terminated or truncated:
                 obs, info = env.reset()
-                trace.append(np.asarray(obs, dtype=np.float64).copy())
+                trace.append(_numbers(obs))
         rollouts.append(trace)
         if rollout == 0:
             problems += found
