@@ -7,7 +7,8 @@ sub-goal) and ``info["is_success"]`` after ``reset`` and every ``step``, and a r
 fixes. :func:`check_env` plays a short seeded rollout and returns what is missing, each as one
 :class:`Problem` naming the part of the contract and how to add it; an empty list means the env
 meets it. Optional parts a low level reads (``subgoal_potential`` for the maze low level's shaping,
-``subgoal_target`` for the scripted ones) are reported as notes, not problems.
+``subgoal_target`` for the scripted ones) are reported as notes, not problems, and so is an ``info``
+sub-goal whose key the env's info never held during the rollouts.
 """
 
 from __future__ import annotations
@@ -135,6 +136,10 @@ def env_notes(env: gym.Env) -> list[str]:
     if grid and not callable(getattr(task, "subgoal_potential", None)):
         notes.append("no subgoal_potential(): the learned grid low level trains without shaping "
                      "(--set low.shaping=0)")
+    unreported = getattr(task, "unreported_info_keys", None)
+    for name, key in (unreported() if callable(unreported) else {}).items():
+        notes.append(f"sub-goal {name!r} reads info[{key!r}], which the env's info never held in these rollouts: "
+                     "it is never achieved unless the env reports that key (check its spelling)")
     if not callable(getattr(task, "subgoal_target", None)):
         notes.append("no subgoal_target(i): the scripted low levels cannot be used (--low-level learned)")
     return notes

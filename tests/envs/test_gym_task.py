@@ -160,3 +160,16 @@ def test_tasks_refuses_the_gym_catalogues_check_env_refuses(tmp_path, corridor, 
     assert main([command, str(path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and fragment in err[0], err
+
+
+def test_check_env_notes_an_info_key_the_env_never_reports(tmp_path, capsys):
+    from hubsgo_ppl.cli import main
+
+    subgoals = [{"name": "slipped", "kind": "info", "args": {"key": "prob"}},     # FrozenLake reports info["prob"]
+                {"name": "gems", "kind": "info", "args": {"key": "has_gemz"}}, {"name": "goal", "kind": "goal"}]
+    path = _catalogue(tmp_path, subgoals, gym_id="FrozenLake-v1", max_episode_steps=20)
+    assert main(["check-env", str(path), "--steps", "20"]) == 0
+    out = capsys.readouterr().out
+    notes = [line for line in out.splitlines() if "never held" in line]
+    assert len(notes) == 1 and notes[0].startswith("note: sub-goal 'gems' reads info['has_gemz']"), out
+    assert "meets the sub-goal contract" in out
