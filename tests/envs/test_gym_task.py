@@ -173,3 +173,16 @@ def test_check_env_notes_an_info_key_the_env_never_reports(tmp_path, capsys):
     notes = [line for line in out.splitlines() if "never held" in line]
     assert len(notes) == 1 and notes[0].startswith("note: sub-goal 'gems' reads info['has_gemz']"), out
     assert "meets the sub-goal contract" in out
+
+
+@pytest.mark.parametrize("space, flattened", [(gym.spaces.Text(6), True),
+                                              (gym.spaces.Sequence(gym.spaces.Discrete(2)), False)])
+def test_a_text_observation_is_flattened_and_a_sequence_refused(space, flattened):
+    from hubsgo_ppl.envs.gym_task import _flat_space
+
+    if flattened:
+        flat = _flat_space(space, "t.yaml")
+        assert flat.shape == (6,) and flat.dtype == np.float32
+    else:
+        with pytest.raises(SpecError, match="t.yaml: the env's observation space .* cannot be flattened"):
+            _flat_space(space, "t.yaml")
