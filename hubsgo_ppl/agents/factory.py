@@ -37,9 +37,15 @@ def _low_level(kind: str, env: gym.Env, n_goals: int, low_cfg: dict, gen: torch.
                rng: np.random.Generator) -> LowLevel:
     obs_dim = int(np.prod(env.observation_space.shape))
     if kind == "learned" and isinstance(env.action_space, gym.spaces.Discrete):
+        config = make_config("low", GoalDQNConfig, low_cfg)
         potential = getattr(env.unwrapped, "subgoal_potential", lambda: None)()
-        return GoalDQN(obs_dim, n_goals, int(env.action_space.n), make_config("low", GoalDQNConfig, low_cfg), gen,
-                       rng, potential=potential)
+        if config.shaping and potential is None:
+            from ..errors import RunError
+
+            raise RunError(f"low.shaping={config.shaping:g} shapes the low level's reward with the env's "
+                           f"subgoal_potential(), which {type(env.unwrapped).__name__} does not give: train with "
+                           "--set low.shaping=0, or add subgoal_potential() to the env (docs/own_env.md)")
+        return GoalDQN(obs_dim, n_goals, int(env.action_space.n), config, gen, rng, potential=potential)
     if kind == "scripted" and isinstance(env.action_space, gym.spaces.Discrete):
         from .scripted_maze import ScriptedMaze
 

@@ -32,8 +32,8 @@ class GoalDQN(LowLevelBase):
                  generator: torch.Generator, rng: np.random.Generator, potential=None):
         self.cfg = config
         if config.shaping and potential is None:
-            raise ValueError("low.shaping > 0 needs the env's subgoal_potential (symbolic observations); "
-                             "set low.shaping=0 or use obs_mode: symbolic")
+            raise ValueError("low.shaping > 0 needs a potential (the env's subgoal_potential()); "
+                             "set low.shaping=0")
         self.potential = potential if config.shaping else None
         self.n_goals, self.n_actions = n_goals, n_actions
         self.rng = rng

@@ -30,11 +30,15 @@ def cmd_tasks(args: argparse.Namespace) -> int:
 
 
 def _check_task(name: str, info: Any, model: str | None) -> None:
-    """What `hubsgo train` checks before a run, without training: a maze's reachability and optimum,
-    and the critic spec the run would use."""
+    """What `hubsgo train` checks before a run, without training: the env's own checks (those of
+    `hubsgo check-env`, which builds it as this does), a maze's reachability and optimum, and the
+    critic spec the run would use."""
+    from ..envs import make
     from ..experiments.run import RunConfig, resolve
 
     from ..envs.minigrid.registered import is_registered
+
+    make(name).close()         # refuses a bad option, kind or argument, as `hubsgo check-env` does
 
     if info.family == "minigrid" and not is_registered(info.catalogue):
         from ..envs.minigrid.bfs import check_reachable, optimal_steps_range
@@ -70,26 +74,27 @@ def _check_task(name: str, info: Any, model: str | None) -> None:
 def cmd_check_env(args: argparse.Namespace) -> int:
     """``hubsgo check-env ENV``: :func:`hubsgo_ppl.envs.check.check_env` on a task, a catalogue or a
     registered Gymnasium id; prints what is missing, one line each, then the optional parts."""
-    import gymnasium as gym
-
-    from ..envs import UnknownTaskError, make
+    from ..envs import _GYM_ID, UnknownTaskError, make
     from ..envs.check import check_env, env_notes
     from ..experiments.run import RunError
 
     if args.steps < 1:
         raise RunError(f"--steps must be a positive number of steps, got {args.steps}")
+    route = None
     try:
         env = make(args.env)
     except UnknownTaskError as unknown:
-        try:
-            env = gym.make(args.env)
-        except gym.error.Error:
-            raise unknown from None
+        if not _GYM_ID.fullmatch(args.env):
+            raise
+        env = _gym_env(args.env, unknown)
+        route = _catalogue_route(env)
     try:
         problems = check_env(env, steps=args.steps, seed=args.seed)
         notes = env_notes(env) if not problems else []
     finally:
         env.close()
+    if route:
+        notes.append(route)
     for problem in problems:
         print(f"missing: {problem}")
     for note in notes:
@@ -97,3 +102,47 @@ def cmd_check_env(args: argparse.Namespace) -> int:
     if not problems:
         print(f"{args.env}: meets the sub-goal contract ({args.steps} steps, seed {args.seed})")
     return 1 if problems else 0
+
+
+def _gym_env(env_id: str, unknown: Exception) -> Any:
+    """The env of a Gymnasium id (MiniGrid's and BabyAI's registered first); an id that is not
+    registered is one line naming the closest registered ones."""
+    import difflib
+    import importlib
+
+    import gymnasium as gym
+
+    from ..experiments.run import RunError
+
+    for module in ("minigrid",):            # registers its ids on import, as a catalogue's gym_id does
+        try:
+            importlib.import_module(module)
+        except ImportError:
+            pass
+    if env_id not in gym.registry:
+        if ":" in env_id:                   # "my_pkg:MyEnv-v0": gymnasium imports my_pkg, then looks again
+            try:
+                return gym.make(env_id)
+            except gym.error.Error:
+                pass
+        if str(unknown).startswith(f"{env_id!r} is the Gymnasium id of task"):
+            raise unknown
+        near = difflib.get_close_matches(env_id, list(gym.registry), n=3, cutoff=0.6)
+        raise RunError(f"{env_id!r} is not a registered Gymnasium id"
+                       + (f" (close: {', '.join(near)})" if near else "")
+                       + "; pass a built-in task, a catalogue .yaml, or a registered id (import the package "
+                         "that registers it with the id's module prefix, my_pkg:MyEnv-v0)")
+    return gym.make(env_id)
+
+
+def _catalogue_route(env: Any) -> str | None:
+    """How to train a MiniGrid environment given by its Gymnasium id: a catalogue that names it."""
+    try:
+        from minigrid.minigrid_env import MiniGridEnv
+    except ImportError:
+        return None
+    if not isinstance(env.unwrapped, MiniGridEnv):
+        return None
+    return ("a MiniGrid environment: to train on it, write a catalogue with family: minigrid and "
+            "options.gym_id naming it, and list its sub-goals (docs/minigrid.md); `hubsgo check-env` that "
+            "catalogue checks it with the sub-goals")

@@ -7,7 +7,8 @@ sub-goal) and ``info["is_success"]`` after ``reset`` and every ``step``, and a r
 fixes. :func:`check_env` plays a short seeded rollout and returns what is missing, each as one
 :class:`Problem` naming the part of the contract and how to add it; an empty list means the env
 meets it. Optional parts a low level reads (``subgoal_potential`` for the maze low level's shaping,
-``subgoal_target`` for the scripted ones) are reported as notes, not problems.
+``subgoal_target`` for the scripted ones) are reported as notes, not problems, and so is an ``info``
+sub-goal whose key the env's info never held during the rollouts.
 """
 
 from __future__ import annotations
@@ -56,6 +57,20 @@ def _flags(info: Any, n: int | None, where: str) -> list[Problem]:
     return out
 
 
+def _numbers(obs: Any) -> np.ndarray:
+    """An observation of any space as one flat float64 array (a dict's values in key order, a text's
+    bytes), so that two rollouts can be compared whatever the observation is."""
+    if isinstance(obs, dict):
+        parts = [_numbers(obs[k]) for k in sorted(obs, key=str)]
+    elif isinstance(obs, (tuple, list)) and not all(isinstance(o, (int, float, np.number)) for o in obs):
+        parts = [_numbers(o) for o in obs]
+    elif isinstance(obs, str):
+        return np.frombuffer(obs.encode(), np.uint8).astype(np.float64)
+    else:
+        return np.asarray(obs, dtype=np.float64).reshape(-1).copy()
+    return np.concatenate(parts) if parts else np.zeros(0)
+
+
 def check_env(env: gym.Env, steps: int = 50, seed: int = 0) -> list[Problem]:
     """What ``env`` lacks of the sub-goal contract, from two seeded rollouts of ``steps`` random steps
     (actions drawn from a generator of ``seed``, not from a global one). Does not close ``env``."""
@@ -84,7 +99,7 @@ def check_env(env: gym.Env, steps: int = 50, seed: int = 0) -> list[Problem]:
     for rollout in range(2):
         rng = np.random.default_rng(seed)
         obs, info = env.reset(seed=seed)
-        trace = [np.asarray(obs, dtype=np.float64).copy()]
+        trace = [_numbers(obs)]
         found = _flags(info, n, "reset")
         for _ in range(int(steps)):
             if isinstance(env.action_space, gym.spaces.Discrete):
@@ -95,13 +110,13 @@ def check_env(env: gym.Env, steps: int = 50, seed: int = 0) -> list[Problem]:
             else:
                 break
             obs, reward, terminated, truncated, info = env.step(action)
-            trace.append(np.asarray(obs, dtype=np.float64).copy())
+            trace.append(_numbers(obs))
             found += [p for p in _flags(info, n, "step") if p not in found]
             if not np.isfinite(float(reward)):
                 found.append(Problem("reward", f"a finite number is needed, got {reward!r}"))
             if terminated or truncated:
                 obs, info = env.reset()
-                trace.append(np.asarray(obs, dtype=np.float64).copy())
+                trace.append(_numbers(obs))
         rollouts.append(trace)
         if rollout == 0:
             problems += found
@@ -121,6 +136,10 @@ def env_notes(env: gym.Env) -> list[str]:
     if grid and not callable(getattr(task, "subgoal_potential", None)):
         notes.append("no subgoal_potential(): the learned grid low level trains without shaping "
                      "(--set low.shaping=0)")
+    unreported = getattr(task, "unreported_info_keys", None)
+    for name, key in (unreported() if callable(unreported) else {}).items():
+        notes.append(f"sub-goal {name!r} reads info[{key!r}], which the env's info never held in these rollouts: "
+                     "it is never achieved unless the env reports that key (check its spelling)")
     if not callable(getattr(task, "subgoal_target", None)):
         notes.append("no subgoal_target(i): the scripted low levels cannot be used (--low-level learned)")
     return notes

@@ -220,6 +220,14 @@ class GymTask(gym.Env):
         self.render_mode = getattr(self.env, "render_mode", None)
         self.subgoal_names: list[str] = cat.names
         self._achieved = np.zeros(len(self._tests), dtype=bool)
+        # the info sub-goals' keys, and the keys the env's info has held since it was built
+        self._info_keys = {sg.name: sg.args["key"] for sg in cat.subgoals if sg.kind == "info"}
+        self._seen_keys: set[Any] = set()
+
+    def unreported_info_keys(self) -> dict[str, Any]:
+        """The ``info`` sub-goals whose key the env's info has not held at any reset or step since it was
+        built, by sub-goal name (`hubsgo check-env` notes them after its rollouts)."""
+        return {name: key for name, key in self._info_keys.items() if key not in self._seen_keys}
 
     def _obs(self, obs: Any) -> np.ndarray:
         if self._flatten:
@@ -228,6 +236,7 @@ class GymTask(gym.Env):
 
     def _info(self, obs: Any, info: dict[str, Any], success: bool) -> dict[str, Any]:
         task = self.env.unwrapped
+        self._seen_keys.update(info)
         self._achieved = np.array([test(task, obs, info, success) for test in self._tests], dtype=bool)
         return {**info, "subgoals": self._achieved.copy(), "is_success": success}
 

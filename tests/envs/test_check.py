@@ -98,3 +98,22 @@ def test_the_cli_passes_a_task_fails_a_plain_env_and_refuses_an_unknown_one(caps
     assert main(["check-env", "no_such_env"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "unknown task 'no_such_env'" in err[0]
+
+
+def test_a_minigrid_id_is_checked_and_pointed_to_the_catalogue_route(capsys):
+    assert main(["check-env", "MiniGrid-Unlock-v0", "--steps", "10"]) == 1
+    out = capsys.readouterr().out.strip().splitlines()
+    missing = [line for line in out if line.startswith("missing: ")]
+    assert missing[0].startswith("missing: observation_space: a flat gymnasium.spaces.Box is needed, got Dict")
+    assert any("unwrapped.subgoal_names" in line for line in missing)
+    assert out[-1].startswith("note: a MiniGrid environment") and "options.gym_id" in out[-1]
+    assert "docs/minigrid.md" in out[-1]
+
+
+@pytest.mark.parametrize("env_id, close", [("Foo-v0", None), ("MiniGrid-Unlok-v0", "MiniGrid-Unlock-v0")])
+def test_an_id_that_is_not_registered_says_so(capsys, env_id, close):
+    assert main(["check-env", env_id]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{env_id!r} is not a registered Gymnasium id" in err[0], err
+    assert "is a Gymnasium id, not a task" not in err[0]
+    assert (close in err[0]) if close else "close:" not in err[0]

@@ -136,3 +136,53 @@ def test_a_gym_catalogue_is_a_task_and_a_scripted_low_level_is_refused(tmp_path,
         resolve_hyper("gym", "corridor", "hubsgo", low_level="scripted")
     with pytest.raises(ConfigError, match="agent hiro sets goals in a space it knows"):
         resolve_hyper("gym", "corridor", "hiro")
+
+
+def test_shaping_without_a_potential_is_one_line_with_a_possible_fix(tmp_path, corridor, capsys):
+    from hubsgo_ppl.cli import main
+
+    path = _catalogue(tmp_path, SUBGOALS)
+    assert main(["train", str(path), "--agent", "hdqn", "--set", "low.shaping=1", "--steps", "50",
+                 "--out", str(tmp_path / "run"), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--set low.shaping=0" in err[0] and "obs_mode" not in err[0], err
+
+
+@pytest.mark.parametrize("options, fragment", [
+    ({"entry_point": "corridor_env:make_nothing", "max_episode_steps": 30}, "has no 'make_nothing'"),
+    ({"gym_id": "MountainCarContinuous-v0"}, "trains on a Discrete action space"),
+])
+@pytest.mark.parametrize("command", ["check-env", "tasks"])
+def test_tasks_refuses_the_gym_catalogues_check_env_refuses(tmp_path, corridor, capsys, options, fragment, command):
+    from hubsgo_ppl.cli import main
+
+    path = _catalogue(tmp_path, [{"name": "goal", "kind": "goal"}], **options)
+    assert main([command, str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and fragment in err[0], err
+
+
+def test_check_env_notes_an_info_key_the_env_never_reports(tmp_path, capsys):
+    from hubsgo_ppl.cli import main
+
+    subgoals = [{"name": "slipped", "kind": "info", "args": {"key": "prob"}},     # FrozenLake reports info["prob"]
+                {"name": "gems", "kind": "info", "args": {"key": "has_gemz"}}, {"name": "goal", "kind": "goal"}]
+    path = _catalogue(tmp_path, subgoals, gym_id="FrozenLake-v1", max_episode_steps=20)
+    assert main(["check-env", str(path), "--steps", "20"]) == 0
+    out = capsys.readouterr().out
+    notes = [line for line in out.splitlines() if "never held" in line]
+    assert len(notes) == 1 and notes[0].startswith("note: sub-goal 'gems' reads info['has_gemz']"), out
+    assert "meets the sub-goal contract" in out
+
+
+@pytest.mark.parametrize("space, flattened", [(gym.spaces.Text(6), True),
+                                              (gym.spaces.Sequence(gym.spaces.Discrete(2)), False)])
+def test_a_text_observation_is_flattened_and_a_sequence_refused(space, flattened):
+    from hubsgo_ppl.envs.gym_task import _flat_space
+
+    if flattened:
+        flat = _flat_space(space, "t.yaml")
+        assert flat.shape == (6,) and flat.dtype == np.float32
+    else:
+        with pytest.raises(SpecError, match="t.yaml: the env's observation space .* cannot be flattened"):
+            _flat_space(space, "t.yaml")

@@ -21,7 +21,7 @@ from typing import Any, Callable
 
 from ...specs import SpecError
 from ..subgoals import Catalogue
-from .cardinal import CARDINAL, primitive, primitives
+from .cardinal import CARDINAL, is_cardinal, primitive, primitives
 from .layout import MazeSpec, MazeState, load_maze_spec
 
 __all__ = ["plan", "plan_or_none", "optimal_steps", "optimal_return", "transition", "holds", "shortest_path_cells",
@@ -412,12 +412,30 @@ def check_reachable(source: Any, max_states: int = 300_000) -> list[str] | None:
     return [names[i] for i in sorted(unmet)]
 
 
+def _drop_would_reach(spec: MazeSpec, start: MazeState, max_states: int = 200_000) -> bool:
+    """Whether the goal, unreachable with the task's actions, is reached once ``drop`` is added (a maze
+    that needs two objects held one after the other); False where it is there already, where there is
+    no pickup, where the actions are the cardinal set (it has no drop), or past ``max_states``."""
+    actions = list(spec.options.actions)
+    if "drop" in actions or is_cardinal(actions) or "pickup" not in primitives(actions) or len(spec.layout.carriables) < 2:
+        return False
+    with_drop = replace(spec, options=spec.options.model_copy(update={"actions": [*actions, "drop"]}))
+    goal = spec.layout.goal
+    try:
+        return _bfs(with_drop, start, lambda s: s.pos == goal, max_states=max_states, put_back=True) is not None
+    except RuntimeError:
+        return False
+
+
 def _unreachable(spec: MazeSpec, starts: list[MazeState]) -> SpecError:
     acts = primitives(spec.options.actions)
     closed = any(d != 2 for d in starts[0].doors)
     locked = any(d == 0 for d in starts[0].doors)
     if closed and "toggle" not in acts:
         hint = "there is no toggle action, so no closed door can be opened; add toggle to options.actions"
+    elif locked and _drop_would_reach(spec, starts[0]):
+        hint = ("the agent holds one object at a time and there is no drop action, so it cannot put a key "
+                "down to take the next one; add drop to options.actions")
     elif locked:
         hint = "check that every locked door on the way has its key on the agent's side of it"
     else:

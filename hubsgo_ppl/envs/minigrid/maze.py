@@ -99,7 +99,7 @@ from minigrid.minigrid_env import MiniGridEnv
 
 from ...specs import SpecError
 from ..subgoals import Catalogue
-from . import cardinal, egocentric
+from . import cardinal, egocentric, image
 from .layout import DIRECTIONS, MazeSpec, MazeState, load_maze_spec
 
 __all__ = ["MazeEnv"]
@@ -303,19 +303,19 @@ class MazeEnv(MiniGridEnv):
 
     def subgoal_potential(self):
         """phi(obs) -> (B, N): minus the Manhattan distance from the agent's cell to each sub-goal's
-        catalogue target, over (width + height); read from symbolic or egocentric observations (None for
-        image ones).
+        catalogue target, over (width + height); read from the observation of any ``obs_mode`` (an image
+        observation's agent cell is where it holds the type ``agent``, :mod:`.image`).
 
         The low level may use it for potential-based shaping (Ng et al. 1999), which leaves its optimal
         policies unchanged; walls are not taken into account (the layout stays the learner's to discover).
         """
         if self.obs_mode == "egocentric":
             return egocentric.potential(self)
-        if self.obs_mode != "symbolic":
-            return None
+        W, H = self.grid.width, self.grid.height
+        if self.obs_mode == "image":
+            return image.fixed_potential(W, H, [target for _, target, _ in self._preds])
         import torch
 
-        W, H = self.grid.width, self.grid.height
         targets = torch.tensor([target for _, target, _ in self._preds], dtype=torch.float32)   # (N, 2)
         off_y, scale = self._off_y, float(W + H)
 

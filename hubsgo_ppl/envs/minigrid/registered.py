@@ -47,8 +47,8 @@ from pydantic import Field, ValidationError, field_validator
 
 from ...specs import SpecError, StrictModel, format_validation_error
 from ..subgoals import Catalogue, load_catalogue
-from . import egocentric
-from .kinds import Kind, Scene, compile_kind, new_scene
+from . import egocentric, image
+from .kinds import KINDS, Kind, Scene, mission_named, compile_kind, new_scene
 
 __all__ = ["RegisteredOptions", "RegisteredEnv", "is_registered", "make_minigrid"]
 
@@ -347,9 +347,14 @@ class RegisteredEnv(gym.Env):
 
     def subgoal_potential(self):
         """phi(obs) -> (B, N): minus the Manhattan distance to each sub-goal's target over (W + H), read
-        from the egocentric offsets (None for image observations)."""
-        if self.obs_mode != "egocentric":
-            return None
+        from the egocentric offsets, or from an image observation (:func:`.image.scene_potential`)."""
+        if self.obs_mode == "image":
+            mission = getattr(self.inner, "mission", None)
+            named = mission_named(mission) if isinstance(mission, str) else None
+            return image.scene_potential(self.width, self.height,
+                                         [(k.kind, KINDS[k.kind].model_validate(sg.args))
+                                          for k, sg in zip(self._kinds, self.catalogue.subgoals)],
+                                         mission_type=named[1] if named else None)
         import torch
 
         n = len(self._marks)

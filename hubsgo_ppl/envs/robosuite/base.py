@@ -385,17 +385,26 @@ class SubgoalManipulationEnv(ManipulationEnv):
             if key not in args:
                 raise SpecError(f"{where}: args.{key}: required for kind {sg.kind!r}; add it")
             args[key] = self._check_arg(where, key, typ, args[key])
+        for key, typ in kind.args.items():     # an object cannot be put on, or moved to, itself
+            if typ == "place" and "object" in args and args[key] == args["object"]:
+                others = [p for p in self._choices(typ) if p != args["object"]]
+                raise SpecError(f"{where}: args.{key}: {args[key]!r} is the object itself; name another "
+                                f"place of {type(self).__name__}: {', '.join(others)}")
         return _Compiled(sg.name, sg.kind, args)
 
+    def _choices(self, typ: str) -> list[str] | None:
+        """The names an argument of type ``typ`` may take (None: a number)."""
+        return {"object": list(self.objects), "location": list(self.locations),
+                "place": list(self.objects) + list(self.locations)}.get(typ)
+
     def _check_arg(self, where: str, key: str, typ: str, value: Any) -> Any:
-        choices = {"object": list(self.objects), "location": list(self.locations),
-                   "place": list(self.objects) + list(self.locations)}.get(typ)
+        choices = self._choices(typ)
         if choices is None:
             if not isinstance(value, (int, float)) or isinstance(value, bool):
                 raise SpecError(f"{where}: args.{key}: expected a number, got {value!r}")
             return float(value)
         if value not in choices:
-            raise SpecError(f"{where}: args.{key}: {value!r} is not {'an' if typ[0] in 'ol' else 'a'} {typ} "
+            raise SpecError(f"{where}: args.{key}: {value!r} is not {'an' if typ[0] in 'aeiou' else 'a'} {typ} "
                             f"of {type(self).__name__}; use one of: {', '.join(choices)}")
         return value
 

@@ -1,6 +1,7 @@
 """The options a robosuite catalogue lists (``options.cubes``, ``options.pads``, ``options.colours``),
 checked in one place: 1 to ``most`` distinct items of the right kind, else one line naming the
-catalogue and the option (docs/arms.md, "Scenes and their options")."""
+catalogue and the option (docs/arms.md, "Scenes and their options"); and its numeric options
+(``horizon``, ``control_freq``, ...), each a positive number."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from typing import Any, Callable
 
 from ...specs import SpecError
 
-__all__ = ["COLOURS", "colour_option", "listed_option"]
+__all__ = ["COLOURS", "POSITIVE", "colour_option", "listed_option", "positive_options"]
 
 #: the cube colours a catalogue may name (``options.colours`` of PushAnyOne, ``options.cubes`` of StackCubes)
 COLOURS = {"red": (1, 0, 0, 1), "green": (0, 1, 0, 1), "blue": (0, 0, 1, 1), "yellow": (1, 1, 0, 1),
@@ -30,3 +31,21 @@ def colour_option(catalogue: Any, key: str, value: Any, most: int) -> tuple[str,
     """A catalogue option that lists distinct cube colours of :data:`COLOURS`."""
     return listed_option(catalogue, key, value, most, lambda c: isinstance(c, str) and c in COLOURS,
                          f"colours of: {', '.join(COLOURS)}")
+
+
+#: the numeric options of a robosuite catalogue -> whether it counts (a whole number) and its unit
+POSITIVE = {"horizon": (True, "control steps"), "control_freq": (True, "control steps per second"),
+            "travel_clearance": (False, "metres"), "wall_height": (False, "metres")}
+
+
+def positive_options(catalogue: Any, options: dict[str, Any]) -> None:
+    """Refuse, in one line naming the catalogue and the key, a numeric option of :data:`POSITIVE` that
+    is not a positive number (a whole one where it counts steps)."""
+    for key, (whole, unit) in POSITIVE.items():
+        if key not in options:
+            continue
+        value = options[key]
+        number = isinstance(value, (int, float)) and not isinstance(value, bool)
+        if not number or not value > 0 or (whole and value != int(value)):
+            raise SpecError(f"{getattr(catalogue, 'source', 'catalogue')}: options.{key}: {value!r} is not a "
+                            f"positive {'whole ' if whole else ''}number of {unit}")

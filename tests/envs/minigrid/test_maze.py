@@ -261,4 +261,3 @@ def test_subgoal_potential_is_minus_manhattan_distance_to_each_target(task):
         obs, _, term, trunc, _ = env.step(int(rng.integers(env.action_space.n)))
         if term or trunc:
             obs, _ = env.reset(seed=2)
-    assert make(task, obs_mode="image").unwrapped.subgoal_potential() is None

@@ -84,3 +84,61 @@ def test_bad_options_name_the_problem(catalogue):
         make_robosuite_task(catalogue("stack_cubes"), wall_heigth=0.1)
     with pytest.raises(SpecError, match="env_class: 'Lift' is not a robosuite task"):
         make_robosuite_task(catalogue("stack_cubes"), env_class="Lift")
+
+
+@pytest.mark.parametrize("key, value", [("horizon", "0"), ("horizon", "12.5"), ("control_freq", "-1"),
+                                        ("travel_clearance", "0"), ("horizon", "many")])
+@pytest.mark.parametrize("command", ["check-env", "tasks"])
+def test_a_numeric_option_that_is_not_positive_is_one_line_naming_the_file_and_key(tmp_path, catalogue, capsys,
+                                                                                   key, value, command):
+    import yaml
+
+    from hubsgo_ppl.cli import main
+
+    data = yaml.safe_load(open(catalogue("push_any_one")).read())
+    data["options"][key] = yaml.safe_load(value)
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(data))
+    assert main([command, str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"bad.yaml: options.{key}: " in err[0] and "is not a positive" in err[0], err
+
+
+def _edited(tmp_path, catalogue, task, edit):
+    import yaml
+
+    data = yaml.safe_load(open(catalogue(task)).read())
+    edit(data)
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return str(path)
+
+
+def _subgoal(**fields):
+    return lambda data: data["subgoals"].append(fields)
+
+
+BAD_SCENES = [
+    ("push_any_one", lambda d: d["options"].update(colours=["magenta", "orange"]), "options.colours: "),
+    ("push_any_one", lambda d: d["options"].update(cubes=["red", "green"]), "unexpected keyword argument 'cubes'"),
+    ("stack_cubes", lambda d: d["options"].update(cubes=["blue", "blue"]), "options.cubes: ['blue', 'blue']"),
+    ("stack_cubes", _subgoal(name="x", kind="place_on", args={"object": "red", "onto": "left_pad"}),
+     "args.onto: 'left_pad' is not a place of StackCubes"),
+    ("stack_cubes", _subgoal(name="x", kind="place_on", args={"object": "red", "onto": "red"}),
+     "args.onto: 'red' is the object itself; name another place of StackCubes"),
+    ("push_any_one", _subgoal(name="x", kind="goal"), "kind 'goal' is not known to PushAnyOne"),
+    ("push_any_one", _subgoal(name="x", kind="push_to", args={"object": "red", "to": "dest_pink"}),
+     "args.to: 'dest_pink' is not a location of PushAnyOne"),
+]
+
+
+@pytest.mark.parametrize("task, edit, fragment", BAD_SCENES)
+@pytest.mark.parametrize("command", [["check-env"], ["tasks"], ["tasks", "--model", "independent"]])
+def test_tasks_and_check_env_refuse_the_same_arm_catalogues(tmp_path, catalogue, capsys, task, edit, fragment,
+                                                            command):
+    from hubsgo_ppl.cli import main
+
+    path = _edited(tmp_path, catalogue, task, edit)
+    assert main([command[0], path, *command[1:]]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and fragment in err[0], err
