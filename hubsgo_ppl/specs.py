@@ -260,8 +260,13 @@ class ModelSpec(StrictModel):
         except (TypeError, ValueError) as exc:     # a parameter of the wrong type (text or a list for a number)
             params = shorten(str(self.prior.params()), VALUE_CHARS)
             raise ValueError(f"prior {self.prior.name!r} {params}: {exc}; give each parameter a number") from None
+        holds_prior = prior.natural_params() is not None    # a pairwise MRF the guide can start equal to
         if "init" not in self.inference.model_fields_set:    # left out: start at the prior where the guide can
-            self.inference.init = "prior" if prior.natural_params() is not None else "edges"
+            self.inference.init = "prior" if holds_prior else "edges"
+        elif self.inference.init == "prior" and not holds_prior:
+            raise ValueError(f"inference.init 'prior' needs a prior the guide (a pairwise MRF) can start equal to, "
+                             f"such as bernoulli or ising, and {self.prior.name!r} is not one; use init: edges, "
+                             f"or leave init out")
         return self
 
 

@@ -148,6 +148,28 @@ def test_a_spec_that_leaves_out_prior_likelihood_and_inference_gets_the_shipped_
     assert load_model_spec(path).inference.init == "edges"
 
 
+def test_init_prior_with_a_prior_the_guide_cannot_hold_is_refused_with_the_spec(tmp_path, capsys):
+    """The spec is refused where it is validated, so `tasks --model` and `train` both say so in one line,
+    before a critic is built; the same init with a prior the guide holds is valid."""
+    from hubsgo_ppl.cli import main
+
+    path = write(tmp_path, prior={"name": "beta_bernoulli", "alpha": 1.0, "beta": 1.0}, inference={"init": "prior"})
+    with pytest.raises(SpecError, match=r"inference.init 'prior' needs a prior the guide .* 'beta_bernoulli' is "
+                                        r"not one; use init: edges"):
+        load_model_spec(path)
+    assert load_model_spec(write(tmp_path, inference={"init": "prior"})).inference.init == "prior"
+    spec = write(tmp_path, name="kd", subgoals=["yellow_key", "yellow_door", "blue_key", "blue_door", "goal"],
+                 edges=[["yellow_key", "yellow_door", "positive"]],
+                 prior={"name": "beta_bernoulli", "alpha": 1.0, "beta": 1.0}, inference={"init": "prior"})
+    for argv in (["tasks", "keydoor", "--model", str(spec)],
+                 ["train", "keydoor", "--model", str(spec), "--steps", "100", "--out", str(tmp_path / "run"),
+                  "--no-progress"]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "inference.init 'prior' needs" in err[0], err
+    assert not (tmp_path / "run").exists()
+
+
 @pytest.mark.parametrize("text, fix", [
     ("name: x\nsubgoals: [a, b\n", "not valid YAML (line 3, column 1: expected ',' or ']'"),
     ("name: x\nsubgoals: [a, b]\nprior: {name: ising}\nprior: {name: bernoulli}\n",
