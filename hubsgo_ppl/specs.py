@@ -272,18 +272,19 @@ class ModelSpec(StrictModel):
 
 def match_subgoals(spec: ModelSpec, names: list[str], source: str) -> ModelSpec:
     """``spec`` with its sub-goals in the task catalogue's order ``names``, matched by name (a spec may
-    list them in any order; edges name their ends, so they need no change). A spec whose names are not
-    the catalogue's is refused with the missing and the extra names."""
+    list them in any order; edges name their ends, so they need no change). A spec that names a
+    sub-goal the catalogue lacks is refused with those names (a spec may list a subset of the task's
+    sub-goals, and no others); one that leaves some out is refused here, where all are matched (a subset
+    is a run's candidates: ``experiments.resolve``)."""
     missing = [n for n in names if n not in spec.subgoals]
     extra = [n for n in spec.subgoals if n not in names]
-    if missing or extra:
-        parts = []
-        if missing:
-            parts.append(f"missing {', '.join(missing)}")
-        if extra:
-            parts.append(f"not in the task: {', '.join(extra)}")
-        raise SpecError(f"{source}: subgoals: {'; '.join(parts)}; list exactly the task's sub-goals "
-                        f"(any order): {', '.join(names)}")
+    if extra:
+        left = f" (it leaves out {', '.join(missing)})" if missing else ""
+        raise SpecError(f"{source}: subgoals: not in the task: {', '.join(extra)}{left}; a spec lists the task's "
+                        f"sub-goals, all of them or some, in any order, and no others: {', '.join(names)}")
+    if missing:
+        raise SpecError(f"{source}: subgoals: missing {', '.join(missing)}; matched by name, a spec lists every "
+                        f"one of the task's sub-goals, in any order: {', '.join(names)}")
     if list(spec.subgoals) == list(names):
         return spec
     return spec.model_copy(update={"subgoals": list(names)})

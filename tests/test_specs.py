@@ -104,8 +104,25 @@ def test_spec_subgoals_are_matched_to_the_catalogue_by_name_in_any_order():
     with pytest.raises(SpecError) as err:
         match_subgoals(short, names, "my_spec.yaml")
     msg = str(err.value)
-    assert msg.startswith("my_spec.yaml: subgoals: missing blue_key, blue_door; not in the task: blue_dor;")
-    assert "\n" not in msg
+    assert msg.startswith("my_spec.yaml: subgoals: not in the task: blue_dor (it leaves out blue_key, blue_door); "
+                          "a spec lists the task's sub-goals, all of them or some, in any order, and no others: "
+                          "yellow_key, yellow_door, blue_key, blue_door, goal")
+    assert "exactly" not in msg and "\n" not in msg
+
+
+def test_a_name_the_catalogue_lacks_is_refused_with_the_subset_rule(tmp_path, capsys):
+    """Every sub-goal of the task plus one it lacks: the line names the extra one and says what a spec may
+    list (some or all of the task's sub-goals), not that it must list exactly the task's."""
+    from hubsgo_ppl.cli import main
+
+    spec = tmp_path / "extra.yaml"
+    spec.write_text(yaml.safe_dump({"name": "extra", "subgoals": ["yellow_key", "yellow_door", "blue_key",
+                                                                  "blue_door", "goal", "purple_key"]}))
+    assert main(["tasks", "keydoor", "--model", str(spec)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    assert "subgoals: not in the task: purple_key; a spec lists the task's sub-goals, all of them or some" in err[0]
+    assert "exactly" not in err[0]
 
 
 def test_a_spec_in_its_own_order_trains_on_the_catalogue_order(tmp_path):
