@@ -55,6 +55,8 @@ class _UniqueKeyLoader(yaml.SafeLoader):
 def load_yaml(path: str | Path, what: str = "spec") -> dict[str, Any]:
     """Read a YAML mapping, with errors that name the file and say what a ``what`` is, never its content."""
     path = Path(path)
+    if path.is_dir():
+        raise SpecError(f"{path}: a directory, not a {what} file; pass the path of the YAML file itself")
     if not path.is_file():
         raise SpecError(f"{path}: no such {what} file; check the path or use a built-in name")
     try:
@@ -315,6 +317,9 @@ def load_model_spec(name_or_path: str | Path, graph: str | None = None) -> Model
         builtin = models_dir() / f"{name_or_path}.yaml"
         if builtin.is_file():
             path = builtin
+        elif path.is_dir():
+            raise SpecError(f"{path}: a directory, not a spec file; pass the path of a critic spec's YAML file, or a "
+                            f"built-in name: {', '.join(list_model_specs())}")
         elif path.suffix in (".yaml", ".yml") or path.parent != Path("."):
             raise SpecError(f"{path}: no such spec file; check the path or use a built-in name: {', '.join(list_model_specs())}")
         else:

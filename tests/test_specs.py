@@ -264,3 +264,18 @@ def test_one_formatter_for_files_sub_keys_and_settings():
     assert str(mine.value) == fmt("InferenceConfig", err.value, model=InferenceConfig, sep="; ")
     assert str(mine.value).endswith(f"InferenceConfig.burn_in = '{'x' * 56}...: input should be a valid integer, "
                                     "unable to parse string as an integer (default 32)")
+
+
+@pytest.mark.parametrize("given", ["folder", "folder/"])
+def test_a_directory_given_as_the_spec_is_named_a_directory(tmp_path, capsys, given):
+    from hubsgo_ppl.cli import main
+
+    (tmp_path / "folder").mkdir()
+    path = str(tmp_path / given)
+    with pytest.raises(SpecError, match=r": a directory, not a spec file; pass the path of a critic spec's YAML"):
+        load_model_spec(path)
+    for argv in (["tasks", "keydoor", "--model", path],
+                 ["train", "keydoor", "--model", path, "--out", str(tmp_path / "run"), "--no-progress"]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "a directory, not a spec file" in err[0] and "no such" not in err[0], err
