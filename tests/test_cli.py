@@ -132,7 +132,8 @@ def test_console_script_is_installed():
     ("nonsense=3", ["unknown setting 'nonsense'", "sections:", "loop"]),
     ("loop=3", ["'loop' is a section"]),
     ("nosection.x=3", ["unknown section 'nosection'"]),
-    ("env.nonsense=3", ["cannot be built with --set env.nonsense=3", "'nonsense'"]),       # caught at build
+    ("env.nonsense=3", ["--set env.nonsense=3: unknown key 'nonsense' in section 'env' (task keydoor); valid keys: ",
+                        "max_steps", "obs_mode", "start", "tile_size"]),
     ("env.start=anywhere", ["cannot be built with --set env.start=anywhere", "use 'cell' or 'room'"]),
     ("loop.filter_refresh=later", ["loop.filter_refresh takes one of 'option', 'episode' (default 'episode')"]),
     ("loop.outcome_window=-1", ["loop.outcome_window takes an integer >= 1 (default 20), got -1"]),
@@ -153,7 +154,7 @@ def test_a_run_that_cannot_be_built_keeps_an_existing_out_folder(capsys, tmp_pat
     out.mkdir()
     (out / "notes.txt").write_text("mine")
     assert main(["train", "keydoor", "--out", str(out), "--no-progress", "--steps", "100",
-                 "--set", "env.nonsense=3"]) == 2
+                 "--set", "env.start=anywhere"]) == 2
     assert "cannot be built" in _one_error_line(capsys)
     assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]
 
