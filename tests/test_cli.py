@@ -485,6 +485,11 @@ def test_resume_refuses_flags_that_would_change_the_run_and_keeps_config_yaml_wi
         assert needle in _one_error_line(capsys)
     assert main(["train", "fourroom", "--out", str(run), "--resume", "--no-progress"]) == 2
     assert "task fourroom (the run's is keydoor)" in _one_error_line(capsys)
+    # another task with its own spec: the task is what differs, not a spec read against the run's task
+    assert main(["train", "fourroom", "--model", "fourroom-specific", "--out", str(run), "--resume",
+                 "--no-progress"]) == 2
+    line = _one_error_line(capsys)
+    assert "task fourroom (the run's is keydoor)" in line and "sub-goal" not in line and "--model" not in line
     assert main(["train", "keydoor", "--out", str(tmp_path / "new"), "--steps", "500", "--set", "steps=300"]) == 2
     assert ("the budget is given twice, --steps 500 and --set steps=300; give it once"
             in _one_error_line(capsys))
