@@ -80,10 +80,40 @@ def test_a_critic_that_never_updated_says_its_sets_are_the_priors():
     critic = SubgoalCritic.from_spec(load_model_spec("keydoor-specific"), seed=0)
     table = subgoal_table(critic, list(critic.names), num_samples=200)
     assert table["updates"] == 0
+    # a table written before it recorded the successes: both reasons, neither claimed
+    last = format_ranking(table).splitlines()[-1]
+    assert last.startswith("the critic never updated: either no training episode succeeded or the high level had not")
+    table["successes"] = 0
     last = format_ranking(table).splitlines()[-1]
     assert last.startswith("the critic never updated: no training episode succeeded")
+    table.update(successes=1, critic_starts={"transitions": 67, "stored": 16})
+    last = format_ranking(table).splitlines()[-1]
+    assert last.startswith("1 training episode succeeded, but the critic had not started updating yet (it starts "
+                           "after 67 high-level transitions (options); this run stored 16); these sets are its prior's")
     table["updates"] = 3
-    assert "never updated" not in format_ranking(table)
+    assert "never updated" not in format_ranking(table) and "not started" not in format_ranking(table)
+
+
+def test_successes_before_the_critics_first_update_are_not_reported_as_none(tmp_path, capsys):
+    """The critic waits for the high level's learning_starts: a run whose episodes succeed before then
+    ends with the number of them in subgoals.json and says so under G*, in train and in subgoals."""
+    import csv
+
+    run = tmp_path / "run"
+    assert main(["train", "keydoor", "--low-level", "scripted", "--steps", "150", "--set", "high.learning_starts=1000",
+                 "--out", str(run), "--no-progress"]) == 0
+    rows = list(csv.DictReader((run / "metrics.csv").open()))
+    won = sum(int(r["success"]) for r in rows)
+    assert won >= 1, rows
+    table = json.loads((run / "subgoals.json").read_text())
+    assert table["updates"] == 0 and table["successes"] == won
+    assert table["critic_starts"]["transitions"] == 1003 and 0 < table["critic_starts"]["stored"] < 1003
+    said = f"{won} training episode{'s' * (won != 1)} succeeded, but the critic had not started updating yet"
+    assert capsys.readouterr().out.strip().splitlines()[-1].startswith(said)
+    for extra in ([], ["--recompute"]):
+        assert main(["subgoals", str(run), *extra]) == 0
+        last = capsys.readouterr().out.strip().splitlines()[-1]
+        assert last.startswith(said) and "no training episode succeeded" not in last
 
 
 @pytest.mark.parametrize("argv, needle", [
