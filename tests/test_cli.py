@@ -888,3 +888,25 @@ def test_a_budget_of_no_steps_is_refused_the_same_way_by_flag_and_by_set(budget,
     line = _one_error_line(capsys)
     assert "steps" in line and budget[-1].split("=")[-1] in line, line
     assert not out.exists()
+
+
+def test_a_stop_at_that_could_not_pause_the_run_is_refused(tmp_path, capsys):
+    """Past the budget (the run ends there anyway), or at or before the step a resumed run has reached."""
+    run = tmp_path / "run"
+    start = ["train", "keydoor", "--low-level", "scripted", "--steps", "300", "--out", str(run), "--no-progress"]
+    assert main([*start, "--stop-at", "5000"]) == 2
+    assert ("--stop-at 5000 is past the run's budget of 300 env steps, where it ends anyway"
+            in _one_error_line(capsys))
+    assert not run.exists()
+    assert main([*start, "--stop-at", "100"]) == 0
+    capsys.readouterr()
+    done = torch.load(run / "checkpoint.pt", weights_only=False)["env_steps"]
+    assert 100 <= done < 300
+    metrics = (run / "metrics.csv").read_bytes()
+    for stop, needle in ((done, f"has already taken {done:,} env steps; give a step above {done}"),
+                         (301, "--stop-at 301 is past the run's budget of 300 env steps")):
+        assert main([*start, "--resume", "--stop-at", str(stop)]) == 2
+        assert needle in _one_error_line(capsys)
+    assert (run / "metrics.csv").read_bytes() == metrics
+    assert main([*start, "--resume", "--steps", "600", "--stop-at", "450"]) == 0       # inside a raised budget
+    assert torch.load(run / "checkpoint.pt", weights_only=False)["env_steps"] >= 450
