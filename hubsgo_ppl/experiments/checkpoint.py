@@ -16,7 +16,8 @@ from .resolved import ResolvedRun, RunError, as_resolved
 
 __all__ = ["CHECKPOINT", "CHECKPOINT_FORMAT", "RUN_FILES", "EPISODE_LOGS", "G_STAR_SAMPLES", "save_checkpoint",
            "read_checkpoint", "checkpoint_env_steps", "read_config_file", "recorded_run", "run_config",
-           "run_dir_checkpoint", "subgoal_table", "g_star_table", "training_successes"]
+           "run_dir_checkpoint", "subgoal_table", "g_star_table", "training_successes",
+           "check_episode_log"]
 
 CHECKPOINT = "checkpoint.pt"
 #: version of the checkpoint layout (``{"format", "config", "agent", "episodes", "env_steps", "wall_time"}``)
@@ -167,3 +168,29 @@ def g_star_table(agent: Any, names: list[str], run_dir: str | Path, num_samples:
         first = max(int(high.cfg.learning_starts), int(high.cfg.batch_size)) + int(cfg.critic_every) - 1
         table["critic_starts"] = {"transitions": first, "stored": len(high.buffer)}
     return table
+
+
+def check_episode_log(run_dir: str | Path, episodes: int) -> None:
+    """Refuse (one line, the files left as they are) a ``metrics.csv`` that holds fewer of the episodes
+    before the checkpoint than the ``episodes`` it recorded: each episode's row is appended before the
+    checkpoint that counts it, so such a file was emptied or cut short, and a resume would lose its
+    history. A missing file is a run whose log was moved away, and goes on without it."""
+    from .io import RunFileError
+    from .logger import read_csv_rows
+
+    path = Path(run_dir) / "metrics.csv"
+    if episodes <= 0 or not path.is_file():
+        return
+    rows = read_csv_rows(path, required=("episode",))      # a file that is no CSV log: RunFileError
+
+    def before(row: dict[str, Any]) -> bool:
+        try:
+            return int(float(row.get("episode") or "")) < episodes
+        except ValueError:
+            return False
+
+    kept = sum(1 for r in rows if before(r))
+    if kept < episodes:
+        raise RunFileError(f"{path}: damaged: it holds {kept} of the {episodes} episodes the checkpoint recorded "
+                           "(emptied or cut short); put the run's own metrics.csv back, or move it out of the run "
+                           "directory to go on without its rows")

@@ -22,7 +22,8 @@ import torch
 
 from ..envs import get_task
 from .callbacks import Callback, CallbackList, TrainingRun, default_callbacks
-from .checkpoint import CHECKPOINT, EPISODE_LOGS, RUN_FILES, read_checkpoint, read_config_file, recorded_run
+from .checkpoint import (CHECKPOINT, EPISODE_LOGS, RUN_FILES, check_episode_log, read_checkpoint, read_config_file,
+                         recorded_run)
 from .restore import build_run, restore
 from .io import RunFileError, is_temp_file, truncate_csv, write_yaml
 from .lock import LOCK_FILE, run_folder_lock
@@ -206,6 +207,7 @@ def _resume(cfg: RunConfig, out: Path, stop_at: int | None = None):
     budget = int(ckpt["config"]["hyper"]["steps"]) if cfg.steps is None else int(cfg.steps)
     if budget > done:       # a run with nothing left to train, or a --steps it has passed, is told so below
         _check_stop_at(stop_at, budget, done, out)
+    check_episode_log(out, int(ckpt["episodes"]))
     _tidy(out, ())
     for name in EPISODE_LOGS:
         truncate_csv(out / name, "episode", int(ckpt["episodes"]))

@@ -55,7 +55,7 @@ from typing import Any
 
 from ..envs import get_task
 from ..envs.subset import catalogue_order, check_subset
-from .checkpoint import CHECKPOINT
+from .checkpoint import CHECKPOINT, check_episode_log
 from .lock import run_folder_lock
 from .io import truncate_csv, write_json, write_text, write_yaml
 from .run import (EPISODE_LOGS, REVISIONS_CSV, RunConfig, RunError, _build, _save,
@@ -152,6 +152,7 @@ def apply_revision(run_dir: str | Path, new_spec: str | Path, steps: int | None 
 
 def _apply_revision(run_dir: Path, new_spec: str | Path, steps: int | None, train_after: bool) -> dict[str, Any]:
     ckpt = run_dir_checkpoint(run_dir)
+    check_episode_log(run_dir, int(ckpt["episodes"]))      # its rows are cut back to the checkpoint below
     old = ckpt["config"]
     if old.get("agent") != "hubsgo" or "model_spec" not in old:
         raise RunError(f"{run_dir}: agent {old.get('agent')!r} has no sub-goal critic to revise; "
