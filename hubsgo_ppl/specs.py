@@ -55,6 +55,8 @@ class _UniqueKeyLoader(yaml.SafeLoader):
 def load_yaml(path: str | Path, what: str = "spec") -> dict[str, Any]:
     """Read a YAML mapping, with errors that name the file and say what a ``what`` is, never its content."""
     path = Path(path)
+    if path.is_dir():
+        raise SpecError(f"{path}: a directory, not a {what} file; pass the path of the YAML file itself")
     if not path.is_file():
         raise SpecError(f"{path}: no such {what} file; check the path or use a built-in name")
     try:
@@ -260,25 +262,31 @@ class ModelSpec(StrictModel):
         except (TypeError, ValueError) as exc:     # a parameter of the wrong type (text or a list for a number)
             params = shorten(str(self.prior.params()), VALUE_CHARS)
             raise ValueError(f"prior {self.prior.name!r} {params}: {exc}; give each parameter a number") from None
+        holds_prior = prior.natural_params() is not None    # a pairwise MRF the guide can start equal to
         if "init" not in self.inference.model_fields_set:    # left out: start at the prior where the guide can
-            self.inference.init = "prior" if prior.natural_params() is not None else "edges"
+            self.inference.init = "prior" if holds_prior else "edges"
+        elif self.inference.init == "prior" and not holds_prior:
+            raise ValueError(f"inference.init 'prior' needs a prior the guide (a pairwise MRF) can start equal to, "
+                             f"such as bernoulli or ising, and {self.prior.name!r} is not one; use init: edges, "
+                             f"or leave init out")
         return self
 
 
 def match_subgoals(spec: ModelSpec, names: list[str], source: str) -> ModelSpec:
     """``spec`` with its sub-goals in the task catalogue's order ``names``, matched by name (a spec may
-    list them in any order; edges name their ends, so they need no change). A spec whose names are not
-    the catalogue's is refused with the missing and the extra names."""
+    list them in any order; edges name their ends, so they need no change). A spec that names a
+    sub-goal the catalogue lacks is refused with those names (a spec may list a subset of the task's
+    sub-goals, and no others); one that leaves some out is refused here, where all are matched (a subset
+    is a run's candidates: ``experiments.resolve``)."""
     missing = [n for n in names if n not in spec.subgoals]
     extra = [n for n in spec.subgoals if n not in names]
-    if missing or extra:
-        parts = []
-        if missing:
-            parts.append(f"missing {', '.join(missing)}")
-        if extra:
-            parts.append(f"not in the task: {', '.join(extra)}")
-        raise SpecError(f"{source}: subgoals: {'; '.join(parts)}; list exactly the task's sub-goals "
-                        f"(any order): {', '.join(names)}")
+    if extra:
+        left = f" (it leaves out {', '.join(missing)})" if missing else ""
+        raise SpecError(f"{source}: subgoals: not in the task: {', '.join(extra)}{left}; a spec lists the task's "
+                        f"sub-goals, all of them or some, in any order, and no others: {', '.join(names)}")
+    if missing:
+        raise SpecError(f"{source}: subgoals: missing {', '.join(missing)}; matched by name, a spec lists every "
+                        f"one of the task's sub-goals, in any order: {', '.join(names)}")
     if list(spec.subgoals) == list(names):
         return spec
     return spec.model_copy(update={"subgoals": list(names)})
@@ -309,6 +317,9 @@ def load_model_spec(name_or_path: str | Path, graph: str | None = None) -> Model
         builtin = models_dir() / f"{name_or_path}.yaml"
         if builtin.is_file():
             path = builtin
+        elif path.is_dir():
+            raise SpecError(f"{path}: a directory, not a spec file; pass the path of a critic spec's YAML file, or a "
+                            f"built-in name: {', '.join(list_model_specs())}")
         elif path.suffix in (".yaml", ".yml") or path.parent != Path("."):
             raise SpecError(f"{path}: no such spec file; check the path or use a built-in name: {', '.join(list_model_specs())}")
         else:

@@ -80,10 +80,40 @@ def test_a_critic_that_never_updated_says_its_sets_are_the_priors():
     critic = SubgoalCritic.from_spec(load_model_spec("keydoor-specific"), seed=0)
     table = subgoal_table(critic, list(critic.names), num_samples=200)
     assert table["updates"] == 0
+    # a table written before it recorded the successes: both reasons, neither claimed
+    last = format_ranking(table).splitlines()[-1]
+    assert last.startswith("the critic never updated: either no training episode succeeded or the high level had not")
+    table["successes"] = 0
     last = format_ranking(table).splitlines()[-1]
     assert last.startswith("the critic never updated: no training episode succeeded")
+    table.update(successes=1, critic_starts={"transitions": 67, "stored": 16})
+    last = format_ranking(table).splitlines()[-1]
+    assert last.startswith("1 training episode succeeded, but the critic had not started updating yet (it starts "
+                           "after 67 high-level transitions (options); this run stored 16); these sets are its prior's")
     table["updates"] = 3
-    assert "never updated" not in format_ranking(table)
+    assert "never updated" not in format_ranking(table) and "not started" not in format_ranking(table)
+
+
+def test_successes_before_the_critics_first_update_are_not_reported_as_none(tmp_path, capsys):
+    """The critic waits for the high level's learning_starts: a run whose episodes succeed before then
+    ends with the number of them in subgoals.json and says so under G*, in train and in subgoals."""
+    import csv
+
+    run = tmp_path / "run"
+    assert main(["train", "keydoor", "--low-level", "scripted", "--steps", "150", "--set", "high.learning_starts=1000",
+                 "--out", str(run), "--no-progress"]) == 0
+    rows = list(csv.DictReader((run / "metrics.csv").open()))
+    won = sum(int(r["success"]) for r in rows)
+    assert won >= 1, rows
+    table = json.loads((run / "subgoals.json").read_text())
+    assert table["updates"] == 0 and table["successes"] == won
+    assert table["critic_starts"]["transitions"] == 1003 and 0 < table["critic_starts"]["stored"] < 1003
+    said = f"{won} training episode{'s' * (won != 1)} succeeded, but the critic had not started updating yet"
+    assert capsys.readouterr().out.strip().splitlines()[-1].startswith(said)
+    for extra in ([], ["--recompute"]):
+        assert main(["subgoals", str(run), *extra]) == 0
+        last = capsys.readouterr().out.strip().splitlines()[-1]
+        assert last.startswith(said) and "no training episode succeeded" not in last
 
 
 @pytest.mark.parametrize("argv, needle", [
@@ -132,7 +162,8 @@ def test_console_script_is_installed():
     ("nonsense=3", ["unknown setting 'nonsense'", "sections:", "loop"]),
     ("loop=3", ["'loop' is a section"]),
     ("nosection.x=3", ["unknown section 'nosection'"]),
-    ("env.nonsense=3", ["cannot be built with --set env.nonsense=3", "'nonsense'"]),       # caught at build
+    ("env.nonsense=3", ["--set env.nonsense=3: unknown key 'nonsense' in section 'env' (task keydoor); valid keys: ",
+                        "max_steps", "obs_mode", "start", "tile_size"]),
     ("env.start=anywhere", ["cannot be built with --set env.start=anywhere", "use 'cell' or 'room'"]),
     ("loop.filter_refresh=later", ["loop.filter_refresh takes one of 'option', 'episode' (default 'episode')"]),
     ("loop.outcome_window=-1", ["loop.outcome_window takes an integer >= 1 (default 20), got -1"]),
@@ -153,7 +184,7 @@ def test_a_run_that_cannot_be_built_keeps_an_existing_out_folder(capsys, tmp_pat
     out.mkdir()
     (out / "notes.txt").write_text("mine")
     assert main(["train", "keydoor", "--out", str(out), "--no-progress", "--steps", "100",
-                 "--set", "env.nonsense=3"]) == 2
+                 "--set", "env.start=anywhere"]) == 2
     assert "cannot be built" in _one_error_line(capsys)
     assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]
 
@@ -484,6 +515,11 @@ def test_resume_refuses_flags_that_would_change_the_run_and_keeps_config_yaml_wi
         assert needle in _one_error_line(capsys)
     assert main(["train", "fourroom", "--out", str(run), "--resume", "--no-progress"]) == 2
     assert "task fourroom (the run's is keydoor)" in _one_error_line(capsys)
+    # another task with its own spec: the task is what differs, not a spec read against the run's task
+    assert main(["train", "fourroom", "--model", "fourroom-specific", "--out", str(run), "--resume",
+                 "--no-progress"]) == 2
+    line = _one_error_line(capsys)
+    assert "task fourroom (the run's is keydoor)" in line and "sub-goal" not in line and "--model" not in line
     assert main(["train", "keydoor", "--out", str(tmp_path / "new"), "--steps", "500", "--set", "steps=300"]) == 2
     assert ("the budget is given twice, --steps 500 and --set steps=300; give it once"
             in _one_error_line(capsys))
@@ -557,6 +593,14 @@ BINARY = b"\xff\xfe\x00\x01garbage"
     ("metrics.csv", b"a,b\n1,2\n", ["review", "RUN", "--no-gif"], "metrics.csv: damaged, its header lacks episode"),
     ("metrics.csv", BINARY, ["train", "keydoor", "--out", "RUN", "--resume", "--steps", "900"],
      "metrics.csv: damaged, not a CSV log"),
+    # emptied or cut short: the checkpoint counts episodes whose rows are gone, and resuming would lose them
+    ("metrics.csv", b"", ["train", "keydoor", "--out", "RUN", "--resume", "--steps", "900"],
+     "metrics.csv: damaged: it holds 0 of the "),
+    ("metrics.csv", b"episode,env_steps,length,success\n0,150,150,0\n", ["train", "keydoor", "--out", "RUN",
+                                                                          "--resume", "--steps", "900"],
+     "metrics.csv: damaged: it holds 1 of the "),
+    ("metrics.csv", b"", ["revise", "RUN", "--model", "keydoor-specific", "--steps", "900"],
+     "metrics.csv: damaged: it holds 0 of the "),
     ("critic_history.csv", BINARY, ["diagnose", "RUN", "--chains", "2", "--draws", "50", "--burn-in", "5"],
      "critic_history.csv: damaged, not a CSV log"),
     ("critic_history.csv", BINARY, ["train", "keydoor", "--out", "RUN", "--resume", "--steps", "900"],
@@ -852,3 +896,25 @@ def test_a_budget_of_no_steps_is_refused_the_same_way_by_flag_and_by_set(budget,
     line = _one_error_line(capsys)
     assert "steps" in line and budget[-1].split("=")[-1] in line, line
     assert not out.exists()
+
+
+def test_a_stop_at_that_could_not_pause_the_run_is_refused(tmp_path, capsys):
+    """Past the budget (the run ends there anyway), or at or before the step a resumed run has reached."""
+    run = tmp_path / "run"
+    start = ["train", "keydoor", "--low-level", "scripted", "--steps", "300", "--out", str(run), "--no-progress"]
+    assert main([*start, "--stop-at", "5000"]) == 2
+    assert ("--stop-at 5000 is past the run's budget of 300 env steps, where it ends anyway"
+            in _one_error_line(capsys))
+    assert not run.exists()
+    assert main([*start, "--stop-at", "100"]) == 0
+    capsys.readouterr()
+    done = torch.load(run / "checkpoint.pt", weights_only=False)["env_steps"]
+    assert 100 <= done < 300
+    metrics = (run / "metrics.csv").read_bytes()
+    for stop, needle in ((done, f"has already taken {done:,} env steps; give a step above {done}"),
+                         (301, "--stop-at 301 is past the run's budget of 300 env steps")):
+        assert main([*start, "--resume", "--stop-at", str(stop)]) == 2
+        assert needle in _one_error_line(capsys)
+    assert (run / "metrics.csv").read_bytes() == metrics
+    assert main([*start, "--resume", "--steps", "600", "--stop-at", "450"]) == 0       # inside a raised budget
+    assert torch.load(run / "checkpoint.pt", weights_only=False)["env_steps"] >= 450

@@ -104,8 +104,25 @@ def test_spec_subgoals_are_matched_to_the_catalogue_by_name_in_any_order():
     with pytest.raises(SpecError) as err:
         match_subgoals(short, names, "my_spec.yaml")
     msg = str(err.value)
-    assert msg.startswith("my_spec.yaml: subgoals: missing blue_key, blue_door; not in the task: blue_dor;")
-    assert "\n" not in msg
+    assert msg.startswith("my_spec.yaml: subgoals: not in the task: blue_dor (it leaves out blue_key, blue_door); "
+                          "a spec lists the task's sub-goals, all of them or some, in any order, and no others: "
+                          "yellow_key, yellow_door, blue_key, blue_door, goal")
+    assert "exactly" not in msg and "\n" not in msg
+
+
+def test_a_name_the_catalogue_lacks_is_refused_with_the_subset_rule(tmp_path, capsys):
+    """Every sub-goal of the task plus one it lacks: the line names the extra one and says what a spec may
+    list (some or all of the task's sub-goals), not that it must list exactly the task's."""
+    from hubsgo_ppl.cli import main
+
+    spec = tmp_path / "extra.yaml"
+    spec.write_text(yaml.safe_dump({"name": "extra", "subgoals": ["yellow_key", "yellow_door", "blue_key",
+                                                                  "blue_door", "goal", "purple_key"]}))
+    assert main(["tasks", "keydoor", "--model", str(spec)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    assert "subgoals: not in the task: purple_key; a spec lists the task's sub-goals, all of them or some" in err[0]
+    assert "exactly" not in err[0]
 
 
 def test_a_spec_in_its_own_order_trains_on_the_catalogue_order(tmp_path):
@@ -146,6 +163,28 @@ def test_a_spec_that_leaves_out_prior_likelihood_and_inference_gets_the_shipped_
     data.pop("prior")
     path.write_text(yaml.safe_dump(data))
     assert load_model_spec(path).inference.init == "edges"
+
+
+def test_init_prior_with_a_prior_the_guide_cannot_hold_is_refused_with_the_spec(tmp_path, capsys):
+    """The spec is refused where it is validated, so `tasks --model` and `train` both say so in one line,
+    before a critic is built; the same init with a prior the guide holds is valid."""
+    from hubsgo_ppl.cli import main
+
+    path = write(tmp_path, prior={"name": "beta_bernoulli", "alpha": 1.0, "beta": 1.0}, inference={"init": "prior"})
+    with pytest.raises(SpecError, match=r"inference.init 'prior' needs a prior the guide .* 'beta_bernoulli' is "
+                                        r"not one; use init: edges"):
+        load_model_spec(path)
+    assert load_model_spec(write(tmp_path, inference={"init": "prior"})).inference.init == "prior"
+    spec = write(tmp_path, name="kd", subgoals=["yellow_key", "yellow_door", "blue_key", "blue_door", "goal"],
+                 edges=[["yellow_key", "yellow_door", "positive"]],
+                 prior={"name": "beta_bernoulli", "alpha": 1.0, "beta": 1.0}, inference={"init": "prior"})
+    for argv in (["tasks", "keydoor", "--model", str(spec)],
+                 ["train", "keydoor", "--model", str(spec), "--steps", "100", "--out", str(tmp_path / "run"),
+                  "--no-progress"]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "inference.init 'prior' needs" in err[0], err
+    assert not (tmp_path / "run").exists()
 
 
 @pytest.mark.parametrize("text, fix", [
@@ -225,3 +264,18 @@ def test_one_formatter_for_files_sub_keys_and_settings():
     assert str(mine.value) == fmt("InferenceConfig", err.value, model=InferenceConfig, sep="; ")
     assert str(mine.value).endswith(f"InferenceConfig.burn_in = '{'x' * 56}...: input should be a valid integer, "
                                     "unable to parse string as an integer (default 32)")
+
+
+@pytest.mark.parametrize("given", ["folder", "folder/"])
+def test_a_directory_given_as_the_spec_is_named_a_directory(tmp_path, capsys, given):
+    from hubsgo_ppl.cli import main
+
+    (tmp_path / "folder").mkdir()
+    path = str(tmp_path / given)
+    with pytest.raises(SpecError, match=r": a directory, not a spec file; pass the path of a critic spec's YAML"):
+        load_model_spec(path)
+    for argv in (["tasks", "keydoor", "--model", path],
+                 ["train", "keydoor", "--model", path, "--out", str(tmp_path / "run"), "--no-progress"]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "a directory, not a spec file" in err[0] and "no such" not in err[0], err

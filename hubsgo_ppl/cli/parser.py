@@ -76,7 +76,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "a resumed run keeps its own)")
     t.add_argument("--stop-at", type=int, metavar="STEP",
                    help="pause once this env step is reached (checkpointed; the schedules still span --steps): "
-                        "review, then `hubsgo revise` or --resume")
+                        "review, then `hubsgo revise` or --resume; a step past the budget, or one a resumed run "
+                        "has reached, is refused")
     t.add_argument("--init-from", metavar="RUN",
                    help="start from this run's critic, high level and low level, sub-goals matched by name")
     t.add_argument("--transfer", metavar="PARTS",

@@ -27,7 +27,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def cmd_subgoals(args: argparse.Namespace) -> int:
-    from ..experiments.run import G_STAR_SAMPLES, RunError, load_run, subgoal_table
+    from ..experiments.run import G_STAR_SAMPLES, RunError, g_star_table, load_run
 
     run_dir = Path(args.run_dir)
     if args.samples is not None and args.samples < 1:
@@ -47,8 +47,8 @@ def cmd_subgoals(args: argparse.Namespace) -> int:
             if not (hasattr(agent, "filter") and hasattr(agent.filter, "critic")):
                 raise RunError(f"{run_dir}: agent {resolved['agent']!r} has no sub-goal critic; "
                                "train with --agent hubsgo to learn sub-goal sets")
-            table = subgoal_table(agent.g_star_critic(), list(env.unwrapped.subgoal_names),
-                                  G_STAR_SAMPLES if args.samples is None else args.samples)
+            table = g_star_table(agent, list(env.unwrapped.subgoal_names), run_dir,
+                                 G_STAR_SAMPLES if args.samples is None else args.samples)
     print(format_ranking(table))
     return 0
 

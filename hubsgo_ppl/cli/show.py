@@ -18,15 +18,36 @@ def format_ranking(table: dict[str, Any]) -> str:
         lines.append(f"{i:>4}  {r['prob']:>9.4f}  {exact:>8}  {{{', '.join(r['subgoals'])}}}{tie}")
     lines.append("marginals P(w=1): " + ", ".join(f"{n}={p:.2f}" for n, p in table["marginals"].items()))
     if table.get("updates") == 0:
-        lines.append("the critic never updated: no training episode succeeded, so it had no evidence, and these "
-                     "sets are its prior's (your edges alone); train longer (`hubsgo train TASK --out RUN --resume "
-                     "--steps N`, N above the run's budget)")
+        lines.append(_never_updated(table))
     elif table["ranking"] and not table["ranking"][0]["subgoals"]:
         lines.append("the most probable set is empty: no sub-goal's evidence outweighs the prior's pull towards "
                      "small sets; positive edges in the spec let in what the successes achieve: `hubsgo review RUN` "
                      "suggests them in RUN/review/suggested_spec.yaml, and `hubsgo revise RUN --model "
                      "RUN/review/suggested_spec.yaml --no-train` reads G* again under them")
     return "\n".join(lines)
+
+
+_TRAIN_LONGER = "train longer (`hubsgo train TASK --out RUN --resume --steps N`, N above the run's budget)"
+
+
+def _never_updated(table: dict[str, Any]) -> str:
+    """Why a critic that never updated did not: no success (no evidence), or successes before its first
+    update, which waits for the high level's transitions (``successes`` and ``critic_starts`` of
+    ``subgoals.json``; a file written without them gets both reasons)."""
+    successes, starts = table.get("successes"), table.get("critic_starts") or {}
+    if successes == 0:
+        return ("the critic never updated: no training episode succeeded, so it had no evidence, and these sets are "
+                f"its prior's (your edges alone); {_TRAIN_LONGER}")
+    if successes:
+        when = ("the high level's learning_starts or batch_size and then loop.critic_every minibatches"
+                if not starts else f"{starts['transitions']:,} high-level transitions (options); this run stored "
+                                   f"{starts['stored']:,}")
+        return (f"{successes} training episode{'s' * (successes != 1)} succeeded, but the critic had not started "
+                f"updating yet (it starts after {when}); these sets are its prior's (your edges alone); "
+                f"{_TRAIN_LONGER}")
+    return ("the critic never updated: either no training episode succeeded or the high level had not yet stored "
+            "the transitions its first update waits for (high.learning_starts); these sets are its prior's (your "
+            f"edges alone); {_TRAIN_LONGER}")
 
 
 def format_transfer(init: dict[str, Any]) -> str:

@@ -29,7 +29,7 @@ from typing import Any, Callable, Iterable
 
 import numpy as np
 
-from .checkpoint import save_checkpoint, subgoal_table
+from .checkpoint import g_star_table, save_checkpoint
 from .io import write_json
 from .logger import CSVOutput, Logger
 from .resolved import ResolvedRun
@@ -290,7 +290,7 @@ class GStarCallback(Callback):
 
     def on_training_end(self, run: TrainingRun) -> None:
         if run.has_critic and run.finished:
-            run.g_star = subgoal_table(run.agent.g_star_critic(), list(run.env.unwrapped.subgoal_names))
+            run.g_star = g_star_table(run.agent, list(run.env.unwrapped.subgoal_names), run.out)
             write_json(run.out / "subgoals.json", run.g_star)
 
 

@@ -16,7 +16,8 @@ from .resolved import ResolvedRun, RunError, as_resolved
 
 __all__ = ["CHECKPOINT", "CHECKPOINT_FORMAT", "RUN_FILES", "EPISODE_LOGS", "G_STAR_SAMPLES", "save_checkpoint",
            "read_checkpoint", "checkpoint_env_steps", "read_config_file", "recorded_run", "run_config",
-           "run_dir_checkpoint", "subgoal_table"]
+           "run_dir_checkpoint", "subgoal_table", "g_star_table", "training_successes",
+           "check_episode_log"]
 
 CHECKPOINT = "checkpoint.pt"
 #: version of the checkpoint layout (``{"format", "config", "agent", "episodes", "env_steps", "wall_time"}``)
@@ -126,10 +127,70 @@ def run_dir_checkpoint(run_dir: Path) -> dict[str, Any]:
 
 def subgoal_table(critic: Any, names: list[str], num_samples: int = G_STAR_SAMPLES, top_k: int = 5) -> dict[str, Any]:
     """G*: the ranking of sub-goal sets from ``num_samples`` critic samples, the marginals and factors,
-    and the critic's number of updates (0: it never had evidence, and G* is its prior's)."""
+    and the critic's number of updates (0: G* is its prior's; :func:`g_star_table` adds why)."""
     ranking = critic.ranking(num_samples=num_samples, top_k=top_k)
     marg = critic.marginals().detach().cpu().numpy().tolist()
     return {"names": names, "num_samples": num_samples, "ranking": ranking, "updates": int(critic.num_updates),
             "marginals": dict(zip(names, marg)),
             "factors": {"unary": critic.factors()["unary"],
                         "pairwise": {f"{u}--{v}": j for (u, v), j in critic.factors()["pairwise"].items()}}}
+
+
+def training_successes(run_dir: str | Path) -> int | None:
+    """The training episodes of a run that succeeded, counted in its ``metrics.csv``; None where the
+    file is missing or cannot be read."""
+    from .io import RunFileError
+    from .logger import read_csv_rows
+
+    path = Path(run_dir) / "metrics.csv"
+    if not path.is_file():
+        return None
+    try:
+        rows = read_csv_rows(path, required=("success",))
+        return sum(1 for r in rows if float(r.get("success") or 0) > 0)
+    except (RunFileError, ValueError):
+        return None
+
+
+def g_star_table(agent: Any, names: list[str], run_dir: str | Path, num_samples: int = G_STAR_SAMPLES
+                 ) -> dict[str, Any]:
+    """``subgoals.json``: :func:`subgoal_table` of the critic G* is read from, with what says why a
+    critic that never updated did not: ``successes`` (the run's successful training episodes) and
+    ``critic_starts`` (``transitions``: the high level's stored transitions at the critic's first
+    update, its ``learning_starts`` or ``batch_size`` and then ``loop.critic_every`` minibatches;
+    ``stored``: those it holds)."""
+    table = subgoal_table(agent.g_star_critic(), names, num_samples)
+    successes = training_successes(run_dir)
+    if successes is not None:
+        table["successes"] = successes
+    high, cfg = getattr(agent, "high", None), getattr(agent, "cfg", None)
+    if high is not None and hasattr(high, "buffer") and hasattr(cfg, "critic_every"):
+        first = max(int(high.cfg.learning_starts), int(high.cfg.batch_size)) + int(cfg.critic_every) - 1
+        table["critic_starts"] = {"transitions": first, "stored": len(high.buffer)}
+    return table
+
+
+def check_episode_log(run_dir: str | Path, episodes: int) -> None:
+    """Refuse (one line, the files left as they are) a ``metrics.csv`` that holds fewer of the episodes
+    before the checkpoint than the ``episodes`` it recorded: each episode's row is appended before the
+    checkpoint that counts it, so such a file was emptied or cut short, and a resume would lose its
+    history. A missing file is a run whose log was moved away, and goes on without it."""
+    from .io import RunFileError
+    from .logger import read_csv_rows
+
+    path = Path(run_dir) / "metrics.csv"
+    if episodes <= 0 or not path.is_file():
+        return
+    rows = read_csv_rows(path, required=("episode",))      # a file that is no CSV log: RunFileError
+
+    def before(row: dict[str, Any]) -> bool:
+        try:
+            return int(float(row.get("episode") or "")) < episodes
+        except ValueError:
+            return False
+
+    kept = sum(1 for r in rows if before(r))
+    if kept < episodes:
+        raise RunFileError(f"{path}: damaged: it holds {kept} of the {episodes} episodes the checkpoint recorded "
+                           "(emptied or cut short); put the run's own metrics.csv back, or move it out of the run "
+                           "directory to go on without its rows")

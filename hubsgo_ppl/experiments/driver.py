@@ -22,7 +22,8 @@ import torch
 
 from ..envs import get_task
 from .callbacks import Callback, CallbackList, TrainingRun, default_callbacks
-from .checkpoint import CHECKPOINT, EPISODE_LOGS, RUN_FILES, read_checkpoint, read_config_file, recorded_run
+from .checkpoint import (CHECKPOINT, EPISODE_LOGS, RUN_FILES, check_episode_log, read_checkpoint, read_config_file,
+                         recorded_run)
 from .restore import build_run, restore
 from .io import RunFileError, is_temp_file, truncate_csv, write_yaml
 from .lock import LOCK_FILE, run_folder_lock
@@ -58,7 +59,7 @@ def train(cfg: RunConfig, out: str | Path, resume: bool = False, progress: bool 
         torch.set_num_threads(int(cfg.threads))     # before anything is built, as in a sweep worker
         with run_folder_lock(out):
             return _train(cfg, out, resume, default_callbacks(stop_at, max_episodes, progress, on_episode) + user,
-                          where)
+                          where, stop_at)
     except KeyboardInterrupt:
         raise RunError(_interrupted(out, where)) from None
 
@@ -76,9 +77,10 @@ def _interrupted(out: Path, where: dict[str, Any]) -> str:
     return "interrupted before the run started; nothing was written"
 
 
-def _train(cfg: RunConfig, out: Path, resume: bool, callbacks: list[Callback], where: dict[str, Any]) -> dict:
+def _train(cfg: RunConfig, out: Path, resume: bool, callbacks: list[Callback], where: dict[str, Any],
+           stop_at: int | None) -> dict:
     with contextlib.ExitStack() as closing:
-        session = RunSession(cfg, out, resume, callbacks, where, closing)
+        session = RunSession(cfg, out, resume, callbacks, where, closing, stop_at)
         agent = session.agent
         with session.diverged():
             while session.wants_chunk():
@@ -93,11 +95,11 @@ class RunSession:
     """One run folder being trained: the run built (or restored), its logs open and its callbacks
     started; :func:`train` plays its chunks one after another, and a lockstep runner
     (``experiments.lockstep``) plays the episodes of several of them together. ``closing`` closes the
-    env, the logs and the callbacks."""
+    env, the logs and the callbacks. ``stop_at``: the env step to pause at, checked against the budget."""
 
     def __init__(self, cfg: RunConfig, out: Path, resume: bool, callbacks: list[Callback], where: dict[str, Any],
-                 closing: contextlib.ExitStack):
-        run, env, agent, wall0, purge = _start(cfg, out, resume)
+                 closing: contextlib.ExitStack, stop_at: int | None = None):
+        run, env, agent, wall0, purge = _start(cfg, out, resume, stop_at)
         where["task"] = run.task_ref
         self.out, self.run, self.agent, self.where = out, run, agent, where
         closing.callback(env.close)
@@ -150,7 +152,21 @@ class RunSession:
         return state.summary
 
 
-def _start(cfg: RunConfig, out: Path, resume: bool) -> tuple[ResolvedRun, Any, Any, float, int | None]:
+def _check_stop_at(stop_at: int | None, budget: int, done: int, out: Path) -> None:
+    """Refuse a ``stop_at`` that could not pause the run: past its budget, or at or before the env step
+    it has reached."""
+    if stop_at is None:
+        return
+    if int(stop_at) > budget:
+        raise RunError(f"--stop-at {stop_at} is past the run's budget of {budget:,} env steps, where it ends anyway; "
+                       f"give a step below {budget}, or raise --steps")
+    if int(stop_at) <= done:
+        raise RunError(f"--stop-at {stop_at}: {out} has already taken {done:,} env steps; give a step above {done} "
+                       f"to pause at")
+
+
+def _start(cfg: RunConfig, out: Path, resume: bool, stop_at: int | None = None
+           ) -> tuple[ResolvedRun, Any, Any, float, int | None]:
     """(resolved run, env, agent, wall time so far, TensorBoard purge step) of a new or resumed run."""
     _refuse_links(out)
     _check_writable(out)
@@ -159,7 +175,7 @@ def _start(cfg: RunConfig, out: Path, resume: bool) -> tuple[ResolvedRun, Any, A
     if started and not ckpt_path.exists():
         _refuse_lost_checkpoint(out)
     if resume and (ckpt_path.exists() or not started):
-        return _resume(cfg, out)
+        return _resume(cfg, out, stop_at)
     if ckpt_path.exists():
         raise RunError(f"{out} already holds a run; continue it with --resume or choose another --out")
     recorded = recorded_run(out) if (out / "config.yaml").exists() else None
@@ -175,20 +191,27 @@ def _start(cfg: RunConfig, out: Path, resume: bool) -> tuple[ResolvedRun, Any, A
             raise RunError(f"{out}: the run started from {recorded.init_from.get('run')} (--init-from) and stopped "
                            "before its first checkpoint; start it anew with the same command and another --out")
         check_catalogue(recorded)
+        _check_stop_at(stop_at, recorded.steps, 0, out)
         return _new(recorded, out, None, started, resumed=True)
     run = resolve_run(cfg)
+    _check_stop_at(stop_at, run.steps, 0, out)
     if recorded is not None and not recorded.same_run(run):
         raise RunError(f"{out} holds a run that stopped before its first checkpoint, with other settings "
                        "(config.yaml); continue it with --resume, or choose another --out")
     return _new(run, out, cfg, started, resumed=False)
 
 
-def _resume(cfg: RunConfig, out: Path):
+def _resume(cfg: RunConfig, out: Path, stop_at: int | None = None):
     ckpt = read_checkpoint(out / CHECKPOINT)
+    done = int(ckpt["env_steps"])
+    budget = int(ckpt["config"]["hyper"]["steps"]) if cfg.steps is None else int(cfg.steps)
+    if budget > done:       # a run with nothing left to train, or a --steps it has passed, is told so below
+        _check_stop_at(stop_at, budget, done, out)
+    check_episode_log(out, int(ckpt["episodes"]))
     _tidy(out, ())
     for name in EPISODE_LOGS:
         truncate_csv(out / name, "episode", int(ckpt["episodes"]))
-    done, budget = int(ckpt["env_steps"]), int(ckpt["config"]["hyper"]["steps"])
+    budget = int(ckpt["config"]["hyper"]["steps"])
     if cfg.steps is not None and int(cfg.steps) != budget:
         if int(cfg.steps) <= done:
             raise RunError(f"{out}: the run has already taken {done:,} env steps; pass --steps above {done} "

@@ -19,7 +19,10 @@ from .io import CheckpointError
 from .resolved import ResolvedRun, RunConfig, RunError, as_resolved
 
 __all__ = ["resolve", "resolve_run", "task_ref", "catalogue_digest", "check_catalogue", "is_catalogue", "task_goals",
-           "warn_goals_left_out", "note_unlinked_goals"]
+           "warn_goals_left_out", "note_unlinked_goals", "env_keys"]
+
+#: MiniGridEnv's arguments that a layout maze sets itself (its size, mission and occlusion)
+_MAZE_SETS = {"self", "catalogue", "mission_space", "grid_size", "width", "height", "see_through_walls"}
 
 
 def task_ref(task: str | Path) -> str:
@@ -69,6 +72,38 @@ def check_catalogue(run: ResolvedRun | Mapping[str, Any]) -> bool:
     return False
 
 
+def env_keys(info: Any) -> list[str] | None:
+    """The keys of section ``env`` (``--set env.KEY=VALUE``) that the env of task ``info`` takes: for a
+    layout maze its own arguments and those it passes on to MiniGridEnv. None where the env passes them
+    on to code of its own (a registered MiniGrid id, a Gymnasium env, a robosuite scene, which names its
+    options itself when one is wrong)."""
+    import inspect
+
+    options = info.catalogue.options if isinstance(info.catalogue.options, dict) else {}
+    if info.family != "minigrid" or "gym_id" in options:
+        return None
+    from minigrid.minigrid_env import MiniGridEnv
+
+    from ..envs.minigrid.maze import MazeEnv
+
+    keys = set()
+    for cls in (MazeEnv, MiniGridEnv):
+        keys |= {p.name for p in inspect.signature(cls.__init__).parameters.values()
+                 if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)}
+    return sorted(keys - _MAZE_SETS)
+
+
+def _check_env_keys(cfg: RunConfig, info: Any) -> None:
+    """Refuse, as an unknown key of any other section is, a ``--set env.KEY`` the task's env does not take."""
+    given = [(item, item.partition("=")[0].strip()[len("env."):]) for item in cfg.overrides
+             if item.partition("=")[0].strip().startswith("env.")]
+    keys = env_keys(info) if given else None
+    for item, name in given:
+        if keys is not None and name not in keys:
+            raise RunError(f"--set {item}: unknown key {name!r} in section 'env' (task {info.name}); valid keys: "
+                           f"{', '.join(keys)}")
+
+
 def resolve(cfg: RunConfig) -> dict[str, Any]:
     """Everything a run needs, as plain data (written to config.yaml and into checkpoints)."""
     return resolve_run(cfg).to_dict()
@@ -95,6 +130,7 @@ def resolve_run(cfg: RunConfig) -> ResolvedRun:
         if not (cfg.overrides or isinstance(exc, ConfigError)):
             raise
         raise RunError(str(exc)) from None
+    _check_env_keys(cfg, info)
     ref = task_ref(cfg.task)
     resolved: dict[str, Any] = {
         "task": info.name, "task_ref": ref, "family": info.family,

@@ -102,7 +102,8 @@ def check_resume(out: str | Path, task: str, *, agent: str | None = None, seed: 
             return              # nothing recorded to compare with: train says what it can do
 
     clash = []
-    if task not in (run.task, run.task_ref) and task_ref(task) != run.task_ref:
+    other_task = task not in (run.task, run.task_ref) and task_ref(task) != run.task_ref
+    if other_task:      # then a spec is not compared: it would be read against the run's task, not the one given
         clash.append(f"task {task} (the run's is {run.task_ref})")
     if agent is not None and agent != run.agent:
         clash.append(f"--agent {agent} (the run's is {run.agent})")
@@ -111,11 +112,11 @@ def check_resume(out: str | Path, task: str, *, agent: str | None = None, seed: 
     if low_level is not None and low_level != run.low_level:
         clash.append(f"--low-level {low_level} (the run's is {run.low_level})")
     ours = dict(run.model_spec or {})
-    if model is not None:
+    if model is not None and not other_task:
         theirs = resolve_run(RunConfig(task=run.task_ref, agent="hubsgo", model=model, graph=graph)).model_spec
         if dict(theirs or {}) != ours:
             clash.append(f"--model {model} (the run's spec is {run.model!r}; revise it with `hubsgo revise`)")
-    elif graph is not None and graph != ours.get("graph"):
+    elif graph is not None and not other_task and graph != ours.get("graph"):
         clash.append(f"--graph {graph} (the run's is {ours.get('graph')}; revise the spec with `hubsgo revise`)")
     if overrides:
         info = get_task(run.task_ref)

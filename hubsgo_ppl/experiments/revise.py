@@ -55,11 +55,11 @@ from typing import Any
 
 from ..envs import get_task
 from ..envs.subset import catalogue_order, check_subset
-from .checkpoint import CHECKPOINT
+from .checkpoint import CHECKPOINT, check_episode_log
 from .lock import run_folder_lock
 from .io import truncate_csv, write_json, write_text, write_yaml
 from .run import (EPISODE_LOGS, REVISIONS_CSV, RunConfig, RunError, _build, _save,
-                  note_unlinked_goals, plot_run_curve, run_config, run_dir_checkpoint, subgoal_table, train,
+                  g_star_table, note_unlinked_goals, plot_run_curve, run_config, run_dir_checkpoint, train,
                   warn_goals_left_out)
 from .remap import TransferError, revise_agent_state
 
@@ -152,6 +152,7 @@ def apply_revision(run_dir: str | Path, new_spec: str | Path, steps: int | None 
 
 def _apply_revision(run_dir: Path, new_spec: str | Path, steps: int | None, train_after: bool) -> dict[str, Any]:
     ckpt = run_dir_checkpoint(run_dir)
+    check_episode_log(run_dir, int(ckpt["episodes"]))      # its rows are cut back to the checkpoint below
     old = ckpt["config"]
     if old.get("agent") != "hubsgo" or "model_spec" not in old:
         raise RunError(f"{run_dir}: agent {old.get('agent')!r} has no sub-goal critic to revise; "
@@ -205,7 +206,7 @@ def _apply_revision(run_dir: Path, new_spec: str | Path, steps: int | None, trai
         for name in EPISODE_LOGS:           # as --resume does: the logs end at the checkpoint
             truncate_csv(run_dir / name, "episode", int(ckpt["episodes"]))
         _save(run_dir, new, agent, float(ckpt.get("wall_time", 0.0)))      # the revision takes effect here
-        g_star = subgoal_table(agent.g_star_critic(), list(env.unwrapped.subgoal_names)) if finished else None
+        g_star = g_star_table(agent, list(env.unwrapped.subgoal_names), run_dir) if finished else None
     write_yaml(run_dir / "config.yaml", new)
     _write_revisions_csv(run_dir, number)
     if g_star is not None:      # the run stays ended: its G* is now the revised critic's

@@ -42,7 +42,8 @@ from ..agents.loop import HRLLoop
 from ..agents.seeding import EVAL_SEED_OFFSET, episode_seed
 from .callbacks import Callback, CallbackList, TrainingRun
 from .checkpoint import (CHECKPOINT, CHECKPOINT_FORMAT, EPISODE_LOGS, G_STAR_SAMPLES, RUN_FILES, read_checkpoint,
-                         read_config_file, run_config, run_dir_checkpoint, save_checkpoint, subgoal_table)
+                         g_star_table, read_config_file, run_config, run_dir_checkpoint, save_checkpoint,
+                         subgoal_table)
 from .restore import build_run, check_resume, load_run, restore
 from .driver import train
 from .io import write_json
@@ -52,7 +53,7 @@ from .resolve import (catalogue_digest, check_catalogue, note_unlinked_goals, re
 from .resolved import CHECKPOINT_STEPS, ResolvedRun, RunConfig, RunError
 
 __all__ = ["RunConfig", "ResolvedRun", "RunError", "Callback", "CallbackList", "TrainingRun", "train", "evaluate",
-           "load_run", "run_config", "check_resume", "resolve", "resolve_run", "subgoal_table", "plot_run_curve",
+           "load_run", "run_config", "check_resume", "resolve", "resolve_run", "subgoal_table", "g_star_table", "plot_run_curve",
            "read_revisions", "read_config_file", "read_checkpoint", "restore", "run_dir_checkpoint", "task_ref", "task_goals",
            "catalogue_digest", "check_catalogue", "note_unlinked_goals", "warn_goals_left_out", "CHECKPOINT",
            "CHECKPOINT_FORMAT", "CHECKPOINT_STEPS", "G_STAR_SAMPLES", "REVISIONS_CSV", "RUN_FILES", "EPISODE_LOGS"]

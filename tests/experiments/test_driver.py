@@ -99,12 +99,12 @@ def test_ctrl_c_at_start_up_is_one_line_and_leaves_no_folder(tmp_path, monkeypat
 def test_ctrl_c_during_the_final_g_star_keeps_the_run_and_resume_finishes_it(tmp_path, monkeypatch, capsys):
     import hubsgo_ppl.experiments.callbacks as callbacks
 
-    real = callbacks.subgoal_table
+    real = callbacks.g_star_table
 
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(callbacks, "subgoal_table", interrupted)
+    monkeypatch.setattr(callbacks, "g_star_table", interrupted)
     out = tmp_path / "run"
     args = ["train", "keydoor", "--out", str(out), "--seed", "3", "--steps", "300", "--checkpoint-steps", "300",
             "--no-progress"] + [a for item in TINY for a in ("--set", item)]
@@ -112,7 +112,7 @@ def test_ctrl_c_during_the_final_g_star_keeps_the_run_and_resume_finishes_it(tmp
     assert main(args) == 2
     assert "holds its final checkpoint" in _one_line(capsys)
     assert not (out / "subgoals.json").exists()
-    monkeypatch.setattr(callbacks, "subgoal_table", real)
+    monkeypatch.setattr(callbacks, "g_star_table", real)
     assert main(["train", "keydoor", "--out", str(out), "--resume", "--no-progress"]) == 0
     assert (out / "subgoals.json").is_file()
 
