@@ -77,7 +77,7 @@ def test_state_dict_round_trip_and_shaping_needs_a_potential():
     other.load_state_dict(low.state_dict())
     assert other.steps == 1 and len(other.buffer) == 1
     assert all(torch.equal(a, b) for a, b in zip(low.q.parameters(), other.q.parameters()))
-    with pytest.raises(ValueError, match="needs the env's subgoal_potential"):
+    with pytest.raises(ValueError, match="needs a potential"):
         _dqn(shaping=1.0)
 
 
