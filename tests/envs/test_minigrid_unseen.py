@@ -142,6 +142,8 @@ def test_a_stranger_s_mistakes_exit_2_with_one_line(gym_id, subgoal, fragment, t
      "'done' is missing and MiniGrid-GoToDoor-5x5-v0 rewards the done action"),
     ("{gym_id: MiniGrid-Empty-5x5-v0, actions: [left, right]}", "{name: spot, kind: at, args: {cell: [2, 2]}}",
      "'forward' is missing and the agent could not move"),
+    ("{gym_id: MiniGrid-Unlock-v0, actions: [left, right, forward, pickup]}", "{name: key, kind: carrying, args: {}}",
+     "'toggle' is missing and MiniGrid-Unlock-v0 rewards the toggle action"),
 ])
 def test_an_action_set_that_cannot_reach_a_sub_goal_or_success_is_refused(options, subgoal, fragment, tmp_path,
                                                                           capsys):
@@ -237,3 +239,16 @@ def test_carrying_anything_aims_at_what_can_be_picked_up_not_at_a_door():
     s = new_scene(g, (3, 2))
     assert held.target(s) == (1, 1)                             # the door and the goal square are nearer
     assert not kind("placed_near", near={}).holds(s)            # the ball is next to nothing
+
+
+def test_the_rewarded_actions_are_read_from_the_branch_of_step_that_pays():
+    from minigrid.envs import DoorKeyEnv, GoToDoorEnv, PutNearEnv, UnlockEnv, UnlockPickupEnv
+
+    from hubsgo_ppl.envs.minigrid.registered import rewarded_actions
+
+    # GoToDoor's step also tests toggle, which ends the episode without reward: not required
+    assert rewarded_actions(GoToDoorEnv) == ["done"]
+    assert rewarded_actions(UnlockEnv) == ["toggle"]
+    assert rewarded_actions(UnlockPickupEnv) == ["pickup"]
+    assert rewarded_actions(PutNearEnv) == ["drop"]
+    assert rewarded_actions(DoorKeyEnv) == []          # MiniGrid's own step: the goal square pays

@@ -31,10 +31,12 @@ channel 1 on lava. ``obs_mode: image`` is MiniGrid's full-grid encoding, ``W*H*3
 
 from __future__ import annotations
 
+import ast
 import contextlib
 import inspect
 import io
 import sys
+import textwrap
 from pathlib import Path
 from typing import Any, Literal
 
@@ -161,20 +163,39 @@ NEEDS: dict[str, tuple[str, ...]] = {"carrying": ("pickup",), "cleared": ("picku
                                      "box_open": ("toggle",), "placed_near": ("pickup", "drop")}
 
 
+def rewarded_actions(env_class: type) -> list[str]:
+    """The actions whose branch of the environment's own ``step`` pays its reward: each ``if`` that tests
+    ``action == self.actions.NAME`` and calls ``self._reward()`` inside (MiniGrid's Unlock: ``toggle``;
+    UnlockPickup and KeyCorridor: ``pickup``; GoToDoor: ``done``, not the ``toggle`` that only ends its
+    episode). Empty where the class keeps MiniGrid's ``step`` (the goal square pays) or has no source."""
+    if "step" not in vars(env_class):
+        return []
+    try:
+        tree = ast.parse(textwrap.dedent(inspect.getsource(env_class.step)))
+    except (OSError, TypeError, SyntaxError):       # no source to read (a compiled or dynamically built class)
+        return []
+
+    def tested(test: ast.expr) -> list[str]:
+        return [n.attr for n in ast.walk(test) if isinstance(n, ast.Attribute) and isinstance(n.value, ast.Attribute)
+                and n.value.attr == "actions" and n.attr in Actions.__members__]
+
+    def pays(body: list[ast.stmt]) -> bool:
+        return any(isinstance(n, ast.Call) and isinstance(n.func, ast.Attribute) and n.func.attr == "_reward"
+                   for stmt in body for n in ast.walk(stmt))
+
+    found = [name for node in ast.walk(tree) if isinstance(node, ast.If) and pays(node.body)
+             for name in tested(node.test)]
+    return list(dict.fromkeys(found))
+
+
 def _check_actions(env: Any, actions: list[str], kinds: tuple[Kind, ...], gym_id: str, source: str) -> None:
     """Refuse, in one line, an action set that cannot reach a sub-goal or the environment's success: no
-    ``forward``; a kind's action (``NEEDS``) missing; or ``done`` missing where the environment's own
-    ``step`` rewards it (MiniGrid's GoToDoor and GoToObject end an episode on ``done`` in front of the
-    target)."""
+    ``forward``; a kind's action (``NEEDS``) missing; or an action the environment's own ``step``
+    rewards missing (:func:`rewarded_actions`: Unlock pays on ``toggle``, GoToDoor on ``done``)."""
     have = set(actions)
     needed = [("forward", "the agent could not move")] + [
         (a, f"subgoals[{i}] ({k.name}) is a {k.kind} sub-goal") for i, k in enumerate(kinds) for a in NEEDS.get(k.kind, ())]
-    if "done" not in have and "step" in vars(type(env)):
-        try:
-            if "actions.done" in inspect.getsource(type(env).step):
-                needed.append(("done", f"{gym_id} rewards the done action"))
-        except (OSError, TypeError):        # no source to read (a compiled or dynamically built class)
-            pass
+    needed += [(a, f"{gym_id} rewards the {a} action") for a in rewarded_actions(type(env))]
     for action, why in needed:
         if action not in have:
             raise SpecError(f"{source}: options.actions: {action!r} is missing and {why}; add {action} to "
