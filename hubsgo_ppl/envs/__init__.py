@@ -91,6 +91,13 @@ def get_task(name_or_path: str | Path) -> TaskInfo:
         ours = next((info.name for info in known.values() if info.env_id == name), None)
         if ours is not None:
             raise UnknownTaskError(f"{name!r} is the Gymnasium id of task {ours!r}: pass {ours}")
+        wraps = sorted(info.name for info in known.values()
+                       if info.family == "minigrid" and load_catalogue(info.catalogue_path).options.get("gym_id") == name)
+        if wraps:
+            raise UnknownTaskError(
+                f"{name!r} is a Gymnasium id, not a task; task {wraps[0]!r} wraps it with a catalogue of sub-goals: "
+                f"pass {wraps[0]} (`hubsgo tasks` lists its sub-goals), or copy {known[wraps[0]].catalogue_path} and "
+                "edit its sub-goals")
         if _GYM_ID.fullmatch(name):
             raise UnknownTaskError(
                 f"{name!r} is a Gymnasium id, not a task: write a catalogue that names it and lists the sub-goals "

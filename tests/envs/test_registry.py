@@ -56,6 +56,7 @@ def test_unknown_task_lists_the_known_ones():
 @pytest.mark.parametrize("name, expected", [
     ("hubsgo/KeyDoor-v0", "is the Gymnasium id of task 'keydoor': pass keydoor"),
     ("MiniGrid-Unlock-v0", "'MiniGrid-Unlock-v0' is a Gymnasium id, not a task: write a catalogue"),
+    ("MiniGrid-DoorKey-8x8-v0", "task 'doorkey_8x8' wraps it with a catalogue of sub-goals: pass doorkey_8x8"),
     ("ALE/Pong-v5", "family gym for any other, docs/own_env.md"),
 ])
 def test_a_gymnasium_id_in_place_of_a_task_says_what_to_pass(name, expected):
