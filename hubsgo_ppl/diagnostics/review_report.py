@@ -113,8 +113,11 @@ def render_markdown(r: dict[str, Any]) -> str:
     if "suggested_spec" in r["files"]:
         added = ("; positive edges added to the goal that G* leaves out" if r.get("suggested_links")
                  else "; nothing added")
-        lines += ["", "`suggested_spec.yaml`, next to this file, is your spec with these changes applied (sub-goals "
-                  f"dropped only where fewer than half of the recent successes achieved them{added}): edit "
+        dropped = ("no sub-goal dropped: the drops above are the critic's starting values, and a spec drops only "
+                   "what this run's successes leave out" if not r.get("critic_updates", 1) else
+                   "sub-goals dropped only where fewer than half of the recent successes achieved them")
+        lines += ["", f"`suggested_spec.yaml`, next to this file, is your spec with these changes applied ({dropped}"
+                  f"{added}): edit "
                   f"it, then `hubsgo revise {r['run_dir']} --model "
                   f"{Path(r.get('review_dir', '.')) / r['files']['suggested_spec']}{revise_flags(r)}`."]
 

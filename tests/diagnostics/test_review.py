@@ -5,6 +5,7 @@ import shutil
 
 import numpy as np
 import pytest
+import yaml
 import torch
 
 from hubsgo_ppl.cli import main
@@ -389,7 +390,12 @@ def test_drops_before_the_critics_first_update_are_called_its_starting_values(ru
     knowledge read back, and the review says so; once the critic has updated it does not."""
     r = review(run, out=tmp_path / "rv0", gif=False, threshold=0.5)     # no success in its 1,500 steps
     assert r["critic_updates"] == 0 and r["suggested_drops"]
-    assert "the critic has not updated on this run yet: this is its starting value (your spec's prior" in (tmp_path / "rv0" / "review.md").read_text()
+    md0 = (tmp_path / "rv0" / "review.md").read_text()
+    assert "the critic has not updated on this run yet: this is its starting value (your spec's prior" in md0
+    # the suggested spec keeps every sub-goal, and review.md says so rather than "these changes applied" alone
+    kept = yaml.safe_load((tmp_path / "rv0" / "suggested_spec.yaml").read_text())["subgoals"]
+    assert {d["name"] for d in r["suggested_drops"]} <= set(kept)
+    assert "no sub-goal dropped: the drops above are the critic's starting values" in md0
     assert main(["review", str(run), "--out", str(tmp_path / "cli0"), "--no-gif", "--threshold", "0.5"]) == 0
     assert "(the critic has not updated on this run yet: its starting values, not what this run learned)" in capsys.readouterr().out
     r = review(run, out=tmp_path / "rv_none", gif=False, threshold=0.0)        # nothing to suggest, and no evidence
