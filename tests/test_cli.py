@@ -673,6 +673,17 @@ def test_a_transfer_to_a_users_maze_without_a_spec_takes_the_source_runs(capsys,
                  "--no-progress", *TINY]) == 0
     assert main(["train", moved, "--out", str(tmp_path / "dst"), "--steps", "200", "--no-progress"]) == 2
     assert "has no built-in critic spec" in _one_error_line(capsys)
+    # a source that is not there is named as such, not as a missing spec
+    assert main(["train", moved, "--init-from", str(tmp_path / "nowhere"), "--out", str(tmp_path / "dst"),
+                 "--steps", "200", "--no-progress"]) == 2
+    assert _one_error_line(capsys).startswith(f"hubsgo: error: --init-from {tmp_path / 'nowhere'}: no such run directory")
+    # a source that trained no critic has no spec to take: said so
+    assert main(["train", hall, "--agent", "hdqn", "--out", str(tmp_path / "plain"), "--steps", "200",
+                 "--no-progress", *TINY]) == 0
+    capsys.readouterr()
+    assert main(["train", moved, "--init-from", str(tmp_path / "plain"), "--out", str(tmp_path / "dst"),
+                 "--steps", "200", "--no-progress"]) == 2
+    assert "trained no critic to take one from: pass --model" in _one_error_line(capsys)
     assert main(["train", moved, "--init-from", str(src), "--out", str(tmp_path / "dst"), "--steps", "200",
                  "--no-progress", *TINY]) == 0
     assert "hubsgo: note: no --model: the critic spec of the --init-from run, 'hall-spec'" in capsys.readouterr().err

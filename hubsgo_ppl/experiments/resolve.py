@@ -152,6 +152,10 @@ def resolve_run(cfg: RunConfig) -> ResolvedRun:
         if missing and cfg.init_from is not None:
             inherited = _source_spec(cfg.init_from)     # a user's maze started from another run: that run's spec
         edgeless = missing and inherited is None and cfg.graph in ("independent", "fully_connected")
+        if missing and inherited is None and not edgeless and cfg.init_from is not None:
+            raise SpecError(f"task {info.name!r} has no built-in critic spec {model}, and the --init-from run "
+                            f"{cfg.init_from} trained no critic to take one from: pass --model my_spec.yaml, or "
+                            "train with --graph independent, which needs no edges")
         if missing and inherited is None and not edgeless:
             raise SpecError(f"task {info.name!r} has no built-in critic spec {model}: write one (its sub-goals, "
                             "your signed edges, the prior and the likelihood; models/keydoor-specific.yaml is an "
@@ -199,8 +203,8 @@ def _source_spec(run_dir: str | Path) -> Any:
 
     try:
         spec = run_config(run_dir).get("model_spec")
-    except (RunError, CheckpointError):
-        return None             # the transfer's own checks name what is wrong with that run
+    except (RunError, CheckpointError) as exc:     # no run there, or a damaged one: that, not a missing spec
+        raise RunError(f"--init-from {run_dir}: {str(exc).removeprefix(f'{run_dir}: ')}") from None
     return ModelSpec.model_validate(spec) if isinstance(spec, dict) else None
 
 
