@@ -633,6 +633,16 @@ def test_a_damaged_run_file_gets_one_line_or_is_read_around(tiny_run, tmp_path, 
         assert target.read_bytes() == (content if content is not None else b"")     # nothing is lost
 
 
+def test_a_resume_without_metrics_csv_goes_on_and_says_whose_rows_are_missing(tiny_run, tmp_path, capsys):
+    run = tmp_path / "run"
+    shutil.copytree(tiny_run, run)
+    (run / "metrics.csv").unlink()
+    capsys.readouterr()
+    assert main(["train", "keydoor", "--out", str(run), "--resume", "--steps", "900", "--no-progress"]) == 0
+    err = capsys.readouterr().err
+    assert f"hubsgo: note: {run / 'metrics.csv'} is missing: the run goes on without the rows of its first" in err
+
+
 def test_an_error_no_check_names_gets_one_line_and_its_traceback_on_request(monkeypatch, capsys):
     from hubsgo_ppl.cli import tasks
 

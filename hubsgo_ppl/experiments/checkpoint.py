@@ -8,6 +8,7 @@ state_dicts and the resolved run as plain data. Its config is checked field by f
 from __future__ import annotations
 
 import numbers
+import sys
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -179,7 +180,11 @@ def check_episode_log(run_dir: str | Path, episodes: int) -> None:
     from .logger import read_csv_rows
 
     path = Path(run_dir) / "metrics.csv"
-    if episodes <= 0 or not path.is_file():
+    if episodes <= 0:
+        return
+    if not path.is_file():
+        print(f"hubsgo: note: {path} is missing: the run goes on without the rows of its first {episodes} "
+              "episodes (put the file back before resuming to keep them)", file=sys.stderr)
         return
     rows = read_csv_rows(path, required=("episode",))      # a file that is no CSV log: RunFileError
 
