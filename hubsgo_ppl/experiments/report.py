@@ -80,8 +80,10 @@ PAPER: dict[str, dict[str, dict[str, tuple[float, float]]]] = {
 def _cardinal_rows(rows: dict[str, dict[str, tuple[float, float]]]) -> dict[str, dict[str, tuple[float, float]]]:
     """The paper's maze baselines most likely ran with the cardinal action set (docs/mazes.md): the rows
     run on it stand beside the paper's rows of the same agent."""
-    return {f"{agent} (cardinal actions)": {t: rows[agent][t] for t in ("fourroom", "keydoor")}
-            for agent in ("HIRO", "HIGL", "PPO") if agent in rows}
+    agents = {"HUBS-GO (specific, cardinal actions)": "HUBS-GO (specific correlations)",
+              "hDQN (cardinal actions)": "hDQN", **{f"{a} (cardinal actions)": a for a in ("HIRO", "HIGL", "PPO")}}
+    return {label: {t: rows[agent][t] for t in ("fourroom", "keydoor")} for label, agent in agents.items()
+            if agent in rows}
 
 
 PAPER = {table: rows | _cardinal_rows(rows) for table, rows in PAPER.items()}
@@ -362,12 +364,18 @@ def write_report(sweep_dir: str | Path, out: str | Path | None = None, bins: int
         labels = {v.name: v.label or v.name for v in spec.variants}
         table = spec.table
         runs = [r for r in runs if r.task in tasks and r.variant in variants and r.seed in spec.seeds]
+        grid = {(column_folder(t.name), v.name): v.steps or t.steps for t in spec.tasks for v in spec.variants}
+        other = [r for r in runs if r.budget is not None and r.budget != grid[(r.task, r.variant)]]
+        runs = [r for r in runs if r not in other]      # another budget than the grid's: never mixed into a cell
+    else:
+        grid, other = {}, []
     unfinished = [r for r in runs if not r.finished]     # a sweep still running, or stopped: not in the tables
     runs = [r for r in runs if r.finished]
     if not runs:
         raise ReportError(f"{sweep_dir}: no finished runs (expected <task>/<variant>/seed<k>/metrics.csv)"
                           f"{' of the grid ' + str(sweep) if sweep is not None else ''}"
-                          f"{f', {len(unfinished)} still short of their budget' if unfinished else ''}; "
+                          f"{f', {len(unfinished)} still short of their budget' if unfinished else ''}"
+                          f"{f', {len(other)} trained at another budget than the grid' if other else ''}; "
                           "run `hubsgo sweep` (again) first")
     if sweep is None:
         tasks, variants, labels, table = _layout(sweep_dir)
@@ -390,6 +398,13 @@ def write_report(sweep_dir: str | Path, out: str | Path | None = None, bins: int
         md += ["", f"Left out, short of their budget ({len(unfinished)}; `hubsgo sweep` again finishes them): "
                + ", ".join(f"{r.task}/{r.variant}/seed{r.seed} at {r.done:,} of {r.budget:,} env steps"
                            for r in sorted(unfinished, key=lambda r: (r.task, r.variant, r.seed))) + "."]
+    if other:
+        what = ", ".join(f"{r.task}/{r.variant}/seed{r.seed} at {r.budget:,}" for r in
+                         sorted(other, key=lambda r: (r.task, r.variant, r.seed)))
+        md += ["", f"Left out, trained at another budget than the grid's ({len(other)}): {what} env steps."]
+        if notes is not None:
+            notes.append(f"left out {len(other)} run(s) trained at another budget than the grid's (results.md "
+                         "names them); a cell never mixes budgets")
     paths: dict[str, Path] = {"table": write_text(out / "results.md", "\n".join(md))}
 
     rows: list[dict[str, Any]] = []

@@ -87,6 +87,7 @@ def test_every_row_of_the_shipped_paper_grids_has_the_papers_numbers():
         assert {v.label for v in spec.variants} <= set(PAPER[table])      # every row the paper has a row for
         assert PAPER[table]["HIGL"]["keydoor"] == (0.5439, 0.0210)
         assert PAPER[table]["HIRO (cardinal actions)"] == {t: PAPER[table]["HIRO"][t] for t in ("fourroom", "keydoor")}
+    assert PAPER["table1"]["HUBS-GO (specific, cardinal actions)"]["keydoor"] == (0.8763, 0.0053)
 
 
 def test_learning_curves_bin_by_steps_and_carry_forward(tmp_path):
@@ -160,6 +161,31 @@ def test_report_limited_to_one_grid_of_a_shared_folder(sweep_dir, tmp_path):
     assert "fourroom" not in ours and "PPO" not in ours and "lonely" not in ours
     with paths["csv"].open() as fh:
         assert sum(r["level"] == "run" for r in csv.DictReader(fh)) == 2
+
+
+def test_with_a_grid_a_run_trained_at_another_budget_is_left_out_and_named(sweep_dir, tmp_path):
+    """--sweep: a run whose config.yaml records another budget than the grid's (a smaller trial run into
+    the same folder) is never mixed into a cell."""
+    root, expected = sweep_dir
+    grid = {"name": "subset", "table": "table1", "seeds": [0, 1, 2], "tasks": [{"name": "keydoor", "steps": 1000}],
+            "variants": [{"name": "ppo", "label": "PPO", "agent": "ppo"}]}
+    path = tmp_path / "subset.yaml"
+    path.write_text(yaml.safe_dump(grid))
+    other = root / "keydoor" / "ppo" / "seed1"
+    (other / "config.yaml").write_text(yaml.safe_dump({"task": "keydoor", "hyper": {"steps": 800}}))
+    notes = []
+    text = write_report(root, out=tmp_path / "rep", sweep=path, notes=notes)["table"].read_text()
+    line = next(l for l in text.split("The paper's")[0].splitlines() if l.startswith("| PPO |"))
+    m, s = map(float, re.fullmatch(r"(\S+) ± (\S+)", line.strip("|").split("|")[1].strip()).groups())
+    kept = [expected[("ppo", "keydoor")][k] for k in (0, 2)]
+    assert m == pytest.approx(statistics.fmean(kept), abs=5e-5)
+    assert s == pytest.approx(statistics.stdev(kept) / math.sqrt(2), abs=5e-5)
+    assert "trained at another budget than the grid's (1): keydoor/ppo/seed1 at 800 env steps" in text
+    assert any("another budget" in n for n in notes)
+    grid["seeds"] = [1]                              # every run at another budget: the error says so
+    path.write_text(yaml.safe_dump(grid))
+    with pytest.raises(ReportError, match="no finished runs.*1 trained at another budget"):
+        write_report(root, out=tmp_path / "rep2", sweep=path)
 
 
 def test_steps_to_success_is_the_first_episode_end_where_the_rolling_rate_reaches_the_threshold():
