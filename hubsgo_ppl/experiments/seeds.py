@@ -15,7 +15,32 @@ from typing import Any, Callable, Sequence
 
 from .resolved import RunConfig, RunError
 
-__all__ = ["train_seeds", "seed_folders", "shares"]
+__all__ = ["train_seeds", "seed_folders", "shares", "stop_with_parent"]
+
+
+def stop_with_parent(interval: float = 1.0) -> None:
+    """In a spawned worker (call it from the main thread): once the process that started it has died
+    (killed, so it could not stop its workers itself), interrupt this one as Ctrl-C does, so that its
+    runs stop where they are, their last checkpoints kept, rather than train on unseen, holding their
+    folders' locks. A daemon thread polls the parent's pid and sends SIGUSR1, whose handler raises
+    KeyboardInterrupt (SIGINT itself may be ignored: a job started in the background of a shell)."""
+    import os
+    import signal
+    import threading
+    import time
+
+    def orphaned(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGUSR1, orphaned)
+    parent = os.getppid()
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(interval)
+        os.kill(os.getpid(), signal.SIGUSR1)
+
+    threading.Thread(target=watch, name="stop-with-parent", daemon=True).start()
 
 
 def seed_folders(out: Path, seeds: Sequence[int]) -> list[Path]:
@@ -67,6 +92,7 @@ def _share_child(cfg: RunConfig, seeds: list[int], outs: list[Path], resumes: li
     from ..errors import CheckpointError
     from ..specs import SpecError
 
+    stop_with_parent()
     try:
         conn.send(("ok", train_seeds(cfg, seeds, outs, resumes, progress=progress)))
     except (RunError, CheckpointError, SpecError) as exc:

@@ -105,6 +105,9 @@ def bundles(jobs: list[Job], workers: int) -> list[list[Job]]:
 
 
 def _child(jobs: list[Job], conn: Any) -> None:
+    from .seeds import stop_with_parent
+
+    stop_with_parent()
     conn.send(run_bundle(jobs))
     conn.close()
 

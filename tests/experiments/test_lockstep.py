@@ -130,3 +130,54 @@ def test_the_process_that_hands_its_seeds_to_workers_imports_no_torch_and_says_a
                           timeout=300)
     assert done.stdout.split() == ["2", "False"], done.stderr
     assert done.stderr.count("unknown task 'nosuch'") == 1 and "Traceback" not in done.stderr
+
+
+_ORPHAN_PARENT = """
+import multiprocessing as mp, sys, time
+from pathlib import Path
+
+def child(marker):
+    from hubsgo_ppl.experiments.seeds import stop_with_parent
+    stop_with_parent(interval=0.05)
+    Path(marker + ".started").write_text("")
+    try:
+        while True:
+            time.sleep(0.01)
+    except KeyboardInterrupt:           # what a run's own handling sees: it stops where it is
+        Path(marker).write_text("interrupted")
+
+if __name__ == "__main__":
+    proc = mp.get_context("spawn").Process(target=child, args=(sys.argv[1],))
+    proc.start()
+    time.sleep(600)
+"""
+
+
+def test_a_worker_whose_parent_is_killed_is_interrupted_and_stops(tmp_path):
+    """Killing the process that spawned the seeds' or a sweep's workers (SIGKILL: it cannot stop them
+    itself) interrupts each worker as Ctrl-C would, even where SIGINT is ignored, instead of leaving it
+    training on, unseen, holding its run folders' locks."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    script, marker = tmp_path / "parent.py", tmp_path / "marker"
+    script.write_text(_ORPHAN_PARENT)
+    parent = subprocess.Popen([sys.executable, str(script), str(marker)],
+                              preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    try:
+        deadline = time.monotonic() + 60
+        while not (tmp_path / "marker.started").exists():
+            assert time.monotonic() < deadline and parent.poll() is None
+            time.sleep(0.05)
+        assert not marker.exists()
+        parent.kill()
+        parent.wait()
+        deadline = time.monotonic() + 20
+        while not marker.exists() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert marker.read_text() == "interrupted"
+    finally:
+        if parent.poll() is None:
+            parent.kill()
