@@ -98,6 +98,10 @@ def get_task(name_or_path: str | Path) -> TaskInfo:
                 f"{name!r} is a Gymnasium id, not a task; task {wraps[0]!r} wraps it with a catalogue of sub-goals: "
                 f"pass {wraps[0]} (`hubsgo tasks` lists its sub-goals), or copy {known[wraps[0]].catalogue_path} and "
                 "edit its sub-goals")
+        if _GYM_ID.fullmatch(name) and not _known_id(name):
+            raise UnknownTaskError(
+                f"unknown task {name!r}, and no Gymnasium id of that name is registered; use one of: "
+                f"{', '.join(sorted(known))} (`hubsgo tasks` lists them), or a path to a catalogue .yaml")
         if _GYM_ID.fullmatch(name):
             raise UnknownTaskError(
                 f"{name!r} is a Gymnasium id, not a task: write a catalogue that names it and lists the sub-goals "
@@ -107,6 +111,19 @@ def get_task(name_or_path: str | Path) -> TaskInfo:
             f"unknown task {name!r}; use one of: {', '.join(sorted(known))} "
             f"(`hubsgo tasks` lists them), or a path to a catalogue .yaml")
     return known[name]
+
+
+def _known_id(env_id: str) -> bool:
+    """Whether Gymnasium knows ``env_id`` (MiniGrid's ids registered first); a ``module:Id`` or a
+    namespaced ``NS/Id`` is taken as known, the package that registers it importing on ``gym.make``
+    or in the user's own code."""
+    if ":" in env_id or "/" in env_id:
+        return True
+    try:
+        import minigrid  # noqa: F401 - registers MiniGrid's and BabyAI's ids
+    except ImportError:
+        pass
+    return env_id in gym.registry
 
 
 _registered = False

@@ -58,12 +58,13 @@ def test_unknown_task_lists_the_known_ones():
     ("MiniGrid-Unlock-v0", "'MiniGrid-Unlock-v0' is a Gymnasium id, not a task: write a catalogue"),
     ("MiniGrid-DoorKey-8x8-v0", "task 'doorkey_8x8' wraps it with a catalogue of sub-goals: pass doorkey_8x8"),
     ("ALE/Pong-v5", "family gym for any other, docs/own_env.md"),
+    ("Foo-v0", "unknown task 'Foo-v0', and no Gymnasium id of that name is registered; use one of: annex"),
 ])
 def test_a_gymnasium_id_in_place_of_a_task_says_what_to_pass(name, expected):
     with pytest.raises(UnknownTaskError) as exc:
         T.get_task(name)
     assert expected in str(exc.value) and "\n" not in str(exc.value)
-    assert "use one of" not in str(exc.value)
+    assert ("use one of" in str(exc.value)) == (name == "Foo-v0")
 
 
 def test_user_catalogue_in_a_temp_folder(tmp_path):
