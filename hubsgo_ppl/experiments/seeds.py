@@ -92,15 +92,18 @@ def _share_child(cfg: RunConfig, seeds: list[int], outs: list[Path], resumes: li
     from ..errors import CheckpointError
     from ..specs import SpecError
 
+    import contextlib
+
     stop_with_parent()
     try:
-        conn.send(("ok", train_seeds(cfg, seeds, outs, resumes, progress=progress)))
+        answer = ("ok", train_seeds(cfg, seeds, outs, resumes, progress=progress))
     except (RunError, CheckpointError, SpecError) as exc:
-        conn.send(("error", " ".join(str(exc).split())))
+        answer = ("error", " ".join(str(exc).split()))
     except BaseException as exc:  # noqa: BLE001 - reported to the parent as one line
-        conn.send(("error", f"seeds {' '.join(map(str, seeds))}: {type(exc).__name__}: {exc}"))
-    finally:
-        conn.close()
+        answer = ("error", f"seeds {' '.join(map(str, seeds))}: {type(exc).__name__}: {exc}")
+    with contextlib.suppress(BrokenPipeError, EOFError, OSError):   # the parent is gone (Ctrl-C): nobody to tell
+        conn.send(answer)
+    conn.close()
 
 
 def _in_workers(cfg: RunConfig, seeds: list[int], outs: list[Path], resumes: list[bool], progress: bool,

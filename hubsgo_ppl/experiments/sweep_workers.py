@@ -7,6 +7,8 @@ reports each run's outcome, and the sweep decides about retries."""
 
 from __future__ import annotations
 
+import contextlib
+
 import multiprocessing as mp
 import os
 import signal
@@ -108,7 +110,9 @@ def _child(jobs: list[Job], conn: Any) -> None:
     from .seeds import stop_with_parent
 
     stop_with_parent()
-    conn.send(run_bundle(jobs))
+    results = run_bundle(jobs)
+    with contextlib.suppress(BrokenPipeError, EOFError, OSError):   # the parent is gone (Ctrl-C): nobody to tell
+        conn.send(results)
     conn.close()
 
 
