@@ -177,7 +177,8 @@ def _start(cfg: RunConfig, out: Path, resume: bool, stop_at: int | None = None
     if resume and (ckpt_path.exists() or not started):
         return _resume(cfg, out, stop_at)
     if ckpt_path.exists():
-        raise RunError(f"{out} already holds a run; continue it with --resume or choose another --out")
+        raise RunError(f"{out} already holds a run; continue it with --resume (resume=True from Python) or choose "
+                       "another --out")
     recorded = recorded_run(out) if (out / "config.yaml").exists() else None
     if resume:          # stopped before its first checkpoint: afresh, exactly as config.yaml records it
         if recorded is None:

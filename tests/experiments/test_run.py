@@ -115,7 +115,7 @@ def test_bad_inputs_fail_clearly_and_lose_nothing(tmp_path):
     run = tmp_path / "run"
     train(_cfg(steps=300), run, progress=False)
     before = (run / "metrics.csv").read_bytes()
-    with pytest.raises(RunError, match="already holds a run"):
+    with pytest.raises(RunError, match=r"already holds a run; continue it with --resume \(resume=True from Python\)"):
         train(_cfg(steps=300), run, progress=False)
     assert (run / "metrics.csv").read_bytes() == before
     (run / "checkpoint.pt").write_bytes(b"not a checkpoint")
