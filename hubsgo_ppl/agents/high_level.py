@@ -85,8 +85,13 @@ class HighLevelDQN:
         self.buffer.add(obs=obs, goal=goal, reward=reward, next_obs=next_obs, discount=discount,
                         available=available)
 
+    @property
+    def first_update(self) -> int:
+        """The stored transitions the first update waits for."""
+        return max(self.cfg.learning_starts, self.cfg.batch_size)
+
     def ready(self) -> bool:
-        return len(self.buffer) >= max(self.cfg.learning_starts, self.cfg.batch_size)
+        return len(self.buffer) >= self.first_update
 
     def update(self, target_mask: torch.Tensor | Callable[[torch.Tensor], Any] | None
                ) -> tuple[dict[str, float], HighLevelBatch]:

@@ -108,17 +108,15 @@ def _gym_env(env_id: str, unknown: Exception) -> Any:
     """The env of a Gymnasium id (MiniGrid's and BabyAI's registered first); an id that is not
     registered is one line naming the closest registered ones."""
     import difflib
-    import importlib
 
     import gymnasium as gym
 
     from ..experiments.run import RunError
 
-    for module in ("minigrid",):            # registers its ids on import, as a catalogue's gym_id does
-        try:
-            importlib.import_module(module)
-        except ImportError:
-            pass
+    try:
+        import minigrid  # noqa: F401 - registers its ids on import, as a catalogue's gym_id does
+    except ImportError:
+        pass
     if env_id not in gym.registry:
         if ":" in env_id:                   # "my_pkg:MyEnv-v0": gymnasium imports my_pkg, then looks again
             try:

@@ -165,8 +165,8 @@ def g_star_table(agent: Any, names: list[str], run_dir: str | Path, num_samples:
     if successes is not None:
         table["successes"] = successes
     high, cfg = getattr(agent, "high", None), getattr(agent, "cfg", None)
-    if high is not None and hasattr(high, "buffer") and hasattr(cfg, "critic_every"):
-        first = max(int(high.cfg.learning_starts), int(high.cfg.batch_size)) + int(cfg.critic_every) - 1
+    if hasattr(high, "first_update") and hasattr(cfg, "critic_every"):
+        first = int(high.first_update) + int(cfg.critic_every) - 1
         table["critic_starts"] = {"transitions": first, "stored": len(high.buffer)}
     return table
 

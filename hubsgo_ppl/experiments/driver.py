@@ -204,15 +204,14 @@ def _start(cfg: RunConfig, out: Path, resume: bool, stop_at: int | None = None
 
 def _resume(cfg: RunConfig, out: Path, stop_at: int | None = None):
     ckpt = read_checkpoint(out / CHECKPOINT)
-    done = int(ckpt["env_steps"])
-    budget = int(ckpt["config"]["hyper"]["steps"]) if cfg.steps is None else int(cfg.steps)
-    if budget > done:       # a run with nothing left to train, or a --steps it has passed, is told so below
-        _check_stop_at(stop_at, budget, done, out)
+    done, budget = int(ckpt["env_steps"]), int(ckpt["config"]["hyper"]["steps"])
+    target = budget if cfg.steps is None else int(cfg.steps)
+    if target > done:       # a run with nothing left to train, or a --steps it has passed, is told so below
+        _check_stop_at(stop_at, target, done, out)
     check_episode_log(out, int(ckpt["episodes"]))
     _tidy(out, ())
     for name in EPISODE_LOGS:
         truncate_csv(out / name, "episode", int(ckpt["episodes"]))
-    budget = int(ckpt["config"]["hyper"]["steps"])
     if cfg.steps is not None and int(cfg.steps) != budget:
         if int(cfg.steps) <= done:
             raise RunError(f"{out}: the run has already taken {done:,} env steps; pass --steps above {done} "

@@ -32,6 +32,7 @@ def _user_task(tmp_path, layout, actions="[left, right, forward, pickup, drop, t
             r: {{type: key, color: red}}
             o: {{type: ball, color: green}}
             Y: {{type: door, color: yellow, locked: true}}
+            R: {{type: door, color: red, locked: true}}
             d: {{type: door, color: blue}}
           max_steps: {max_steps}
           start_dir: {start_dir}
@@ -461,26 +462,6 @@ def test_shortest_path_cells_cover_both_keydoor_routes_and_grow_with_slack():
 
 
 
-def _chain(tmp_path, layout, actions):
-    (tmp_path / "c.txt").write_text(layout)
-    path = tmp_path / "c.yaml"
-    path.write_text(textwrap.dedent(f"""\
-        task: c
-        family: minigrid
-        options:
-          layout: c.txt
-          legend:
-            y: {{type: key, color: yellow}}
-            Y: {{type: door, color: yellow, locked: true}}
-            r: {{type: key, color: red}}
-            R: {{type: door, color: red, locked: true}}
-          actions: {actions}
-        subgoals:
-          - {{name: goal, kind: goal}}
-        """))
-    return path
-
-
 CHAIN = """\
 ###########
 #A.y#..r#.#
@@ -491,16 +472,16 @@ CHAIN = """\
 
 
 def test_a_chain_of_keys_without_drop_names_the_missing_drop(tmp_path):
-    path = _chain(tmp_path, CHAIN, "[left, right, forward, pickup, toggle]")
+    path = _user_task(tmp_path, CHAIN, "[left, right, forward, pickup, toggle]")
     with pytest.raises(SpecError, match="cannot be reached") as err:
         bfs.check_reachable(path)
     assert "there is no drop action" in str(err.value) and "add drop to options.actions" in str(err.value)
     assert "key on the agent's side" not in str(err.value)
-    assert bfs.check_reachable(_chain(tmp_path, CHAIN, "[left, right, forward, pickup, drop, toggle]")) == []
+    assert bfs.check_reachable(_user_task(tmp_path, CHAIN, "[left, right, forward, pickup, drop, toggle]")) == []
 
 
 def test_a_key_behind_its_own_door_keeps_the_key_hint(tmp_path):
     behind = CHAIN.replace("#A.y#..r#", "#A..#.yr#")        # the yellow key behind the yellow door
-    path = _chain(tmp_path, behind, "[left, right, forward, pickup, toggle]")
+    path = _user_task(tmp_path, behind, "[left, right, forward, pickup, toggle]")
     with pytest.raises(SpecError, match="key on the agent's side"):
         bfs.check_reachable(path)
