@@ -5,14 +5,16 @@ from __future__ import annotations
 
 import warnings
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 from minigrid.core.grid import Grid
-from minigrid.core.world_object import Ball, Box, Door, Key, Wall
+from minigrid.core.world_object import Ball, Box, Door, Goal, Key, Lava, Wall
 
 from hubsgo_ppl.cli import main
 from hubsgo_ppl.envs import make
 from hubsgo_ppl.envs.minigrid.kinds import compile_kind, mission_named, new_scene
+from hubsgo_ppl.envs.minigrid.reach import goal_reachable, missing_for_goal
 from hubsgo_ppl.envs.subgoals import SubgoalDef
 from hubsgo_ppl.specs import SpecError
 
@@ -144,6 +146,14 @@ def test_a_stranger_s_mistakes_exit_2_with_one_line(gym_id, subgoal, fragment, t
      "'forward' is missing and the agent could not move"),
     ("{gym_id: MiniGrid-Unlock-v0, actions: [left, right, forward, pickup]}", "{name: key, kind: carrying, args: {}}",
      "'toggle' is missing and MiniGrid-Unlock-v0 rewards the toggle action"),
+    # no sub-goal needs the missing action, but every layout's goal square lies behind a door
+    ("{gym_id: MiniGrid-DoorKey-5x5-v0, actions: [left, right, forward, pickup]}", "{name: key, kind: carrying, args: {}}",
+     "with ['left', 'right', 'forward', 'pickup'] the agent can reach the goal square in none of 8 seeded layouts of "
+     "MiniGrid-DoorKey-5x5-v0; add toggle to options.actions"),
+    ("{gym_id: MiniGrid-DoorKey-5x5-v0, actions: [left, right, forward, toggle]}", "{name: d, kind: door_open, args: {}}",
+     "add pickup to options.actions"),
+    ("{gym_id: MiniGrid-MultiRoom-N2-S4-v0, actions: [left, right, forward]}", "{name: g, kind: goal}",
+     "add toggle to options.actions"),
 ])
 def test_an_action_set_that_cannot_reach_a_sub_goal_or_success_is_refused(options, subgoal, fragment, tmp_path,
                                                                           capsys):
@@ -252,3 +262,37 @@ def test_the_rewarded_actions_are_read_from_the_branch_of_step_that_pays():
     assert rewarded_actions(UnlockPickupEnv) == ["pickup"]
     assert rewarded_actions(PutNearEnv) == ["drop"]
     assert rewarded_actions(DoorKeyEnv) == []          # MiniGrid's own step: the goal square pays
+
+
+def test_the_goal_square_is_reached_only_through_a_door_the_actions_can_open():
+    """room(): the agent at (1, 1), the goal at (5, 2) beyond the door at (4, 2)."""
+    acts = ["left", "right", "forward"]
+
+    def reach(door, *objects, actions, carrying=None, goal=(5, 2)):
+        g = room((door, (4, 2)), (Goal(), goal), *objects)
+        return goal_reachable(SimpleNamespace(grid=g, agent_pos=(1, 1), carrying=carrying), actions)
+
+    assert reach(Door("red", is_open=True), actions=acts) is True
+    assert reach(Door("red"), actions=acts) is False
+    assert reach(Door("red"), actions=[*acts, "toggle"]) is True
+    locked = Door("red", is_locked=True)
+    assert reach(locked, actions=[*acts, "toggle"]) is False
+    assert reach(locked, (Key("red"), (2, 3)), actions=[*acts, "toggle"]) is False
+    assert reach(locked, (Key("red"), (2, 3)), actions=[*acts, "pickup", "toggle"]) is True
+    assert reach(locked, (Key("blue"), (2, 3)), actions=[*acts, "pickup", "toggle"]) is False
+    assert reach(locked, (Box("green", contains=Key("red")), (2, 3)), actions=[*acts, "pickup"]) is False
+    assert reach(locked, (Box("green", contains=Key("red")), (2, 3)), actions=[*acts, "pickup", "toggle"]) is True
+    assert reach(locked, actions=[*acts, "toggle"], carrying=Key("red")) is True
+    # a key beyond its own door, and a wall of lava before the door, are never passed
+    assert reach(locked, (Key("red"), (6, 3)), actions=[*acts, "pickup", "toggle"]) is False
+    lava = [(Lava(), (3, y)) for y in range(1, 4)]
+    assert reach(Door("red", is_open=True), *lava, actions=acts) is False
+    # a ball in the doorway's way is taken away only with pickup
+    assert reach(Door("red", is_open=True), (Ball("red"), (3, 2)), (Ball("red"), (3, 1)), (Ball("red"), (3, 3)),
+                 actions=acts) is False
+    assert reach(Door("red", is_open=True), (Ball("red"), (3, 2)), (Ball("red"), (3, 1)), (Ball("red"), (3, 3)),
+                 actions=[*acts, "pickup"]) is True
+    assert goal_reachable(SimpleNamespace(grid=room(), agent_pos=(1, 1), carrying=None), acts) is None
+    env = SimpleNamespace(grid=room((locked, (4, 2)), (Goal(), (5, 2)), (Key("red"), (2, 3))), agent_pos=(1, 1),
+                          carrying=None)
+    assert missing_for_goal(env, acts) == ["toggle", "pickup"] and missing_for_goal(env, [*acts, "pickup"]) == ["toggle"]

@@ -51,6 +51,7 @@ from ...specs import SpecError, StrictModel, format_validation_error
 from ..subgoals import Catalogue, load_catalogue
 from . import egocentric, image
 from .kinds import KINDS, Kind, Scene, mission_named, compile_kind, new_scene
+from .reach import goal_reachable, missing_for_goal
 
 __all__ = ["RegisteredOptions", "RegisteredEnv", "is_registered", "make_minigrid"]
 
@@ -113,13 +114,21 @@ def _quiet_reset(env: Any, seed: int | None, options: dict[str, Any] | None = No
         env.reset(seed=seed, options=options)
 
 
-def _probe(gym_id: str, source: str, kwargs: dict[str, Any], kinds: tuple[Kind, ...]) -> None:
+def _probe(gym_id: str, source: str, kwargs: dict[str, Any], kinds: tuple[Kind, ...], actions: list[str]
+           ) -> list[str] | None:
     """Refuse, in one line, an env that cannot generate a layout, and a sub-goal whose type of object is in
     none of ``PROBE_RESETS`` seeded layouts (on the floor, in a box or carried at reset); warn, once, where
     the type is there but never in the colour (or lock) the sub-goal names, as environments that draw
-    colours at random may have it in other layouts. Resets an env of its own: the caller's is untouched."""
+    colours at random may have it in other layouts. Resets an env of its own: the caller's is untouched.
+
+    Returns what :func:`_check_actions` refuses where ``actions`` reach the goal square (:mod:`.reach`) in
+    none of the layouts that have one and the environment pays for nothing else (DoorKey without
+    ``toggle``): the actions that would (``["a way through"]`` where none would); else None."""
     wanted = [(i, k, what, match) for i, k in enumerate(kinds) for what, match in k.selects]
     env, seen = _inner(gym_id, source, **kwargs), set()
+    # None: settled (a goal square reached, or the env pays on an action of its own: Unlock's toggle);
+    # []: no layout probed yet; else what the layouts with a goal square, all unreached, would need
+    blocked: list[str] | None = None if rewarded_actions(type(env)) else []
     try:
         for seed in range(PROBE_RESETS):
             try:
@@ -128,18 +137,24 @@ def _probe(gym_id: str, source: str, kwargs: dict[str, Any], kinds: tuple[Kind, 
                 raise SpecError(f"{source}: options.gym_id: {gym_id!r} could not generate a layout "
                                 f"({type(exc).__name__}: {' '.join(str(exc).split())}); use a MiniGrid id "
                                 "whose dependencies are installed") from None
-            if not wanted:
-                return
+            if blocked is not None:
+                reached = goal_reachable(env, actions)
+                if reached is False and not blocked:
+                    blocked = missing_for_goal(env, actions) or ["a way through"]
+                elif reached or (reached is None and not blocked):     # None: a layout with no goal square
+                    blocked = None
+            if not wanted and blocked is None:
+                return None
             s = new_scene(env.grid, tuple(env.agent_pos), env.carrying)
             objs = [o for o, _ in s.objects] + [o.contains for o, _ in s.objects
                                                 if o.type == "box" and o.contains is not None]
             objs += [env.carrying] if env.carrying is not None else []
             seen |= {f"{o.color} {o.type}" for o in objs}
             wanted = [(i, k, what, m) for i, k, what, m in wanted if not any(m(s, o) for o in objs)]
-            if not wanted:
-                return
     finally:
         env.close()
+    if not wanted:
+        return blocked or None
     types = {entry.split()[-1] for entry in seen}
     for i, k, what, _ in wanted:
         article = "an" if what[0] in "aeiou" else "a"
@@ -153,6 +168,7 @@ def _probe(gym_id: str, source: str, kwargs: dict[str, Any], kinds: tuple[Kind, 
                 print(f"hubsgo: warning: {line}; it holds only in layouts that have one", file=sys.stderr)
             continue
         raise SpecError(f"{line}; change its args or drop it")
+    return blocked or None
 
 
 #: the probe's warnings already printed in this process (an env is built for each run, evaluation, seed)
@@ -188,10 +204,12 @@ def rewarded_actions(env_class: type) -> list[str]:
     return list(dict.fromkeys(found))
 
 
-def _check_actions(env: Any, actions: list[str], kinds: tuple[Kind, ...], gym_id: str, source: str) -> None:
+def _check_actions(env: Any, actions: list[str], kinds: tuple[Kind, ...], gym_id: str, source: str,
+                   blocked: list[str] | None = None) -> None:
     """Refuse, in one line, an action set that cannot reach a sub-goal or the environment's success: no
-    ``forward``; a kind's action (``NEEDS``) missing; or an action the environment's own ``step``
-    rewards missing (:func:`rewarded_actions`: Unlock pays on ``toggle``, GoToDoor on ``done``)."""
+    ``forward``; a kind's action (``NEEDS``) missing; an action the environment's own ``step`` rewards
+    missing (:func:`rewarded_actions`: Unlock pays on ``toggle``, GoToDoor on ``done``); or, ``blocked``
+    (:func:`_probe`), no probed layout whose goal square the actions reach."""
     have = set(actions)
     needed = [("forward", "the agent could not move")] + [
         (a, f"subgoals[{i}] ({k.name}) is a {k.kind} sub-goal") for i, k in enumerate(kinds) for a in NEEDS.get(k.kind, ())]
@@ -200,6 +218,12 @@ def _check_actions(env: Any, actions: list[str], kinds: tuple[Kind, ...], gym_id
         if action not in have:
             raise SpecError(f"{source}: options.actions: {action!r} is missing and {why}; add {action} to "
                             f"options.actions (now {actions})")
+    if blocked:
+        add = " and ".join(a for a in blocked if a != "a way through")
+        hint = (f"add {add} to options.actions (doors, keys or objects stand between the agent and the goal)"
+                if add else "walls or lava cut the agent off from the goal in every one")
+        raise SpecError(f"{source}: options.actions: with {actions} the agent can reach the goal square in none of "
+                        f"{PROBE_RESETS} seeded layouts of {gym_id}; {hint}")
 
 
 class RegisteredEnv(gym.Env):
@@ -242,8 +266,8 @@ class RegisteredEnv(gym.Env):
         self._marks: tuple[Kind, ...] = self._kinds if cat.observed is None else tuple(
             compile_kind(i, sg, source) for i, sg in enumerate(marks))
         self._mark_cols = np.array([[sg.name for sg in marks].index(n) for n in self.subgoal_names], np.int64)
-        _probe(opts.gym_id, source, {"max_steps": steps} if steps else {}, self._kinds)
-        _check_actions(self.inner, opts.actions, self._kinds, opts.gym_id, source)
+        blocked = _probe(opts.gym_id, source, {"max_steps": steps} if steps else {}, self._kinds, opts.actions)
+        _check_actions(self.inner, opts.actions, self._kinds, opts.gym_id, source, blocked)
         self._action_map = tuple(Actions[a] for a in opts.actions)
         self.action_names = list(opts.actions)
         self.action_space = spaces.Discrete(len(self._action_map))
