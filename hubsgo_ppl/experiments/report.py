@@ -24,6 +24,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -341,6 +342,13 @@ def _csv(rows: list[dict[str, Any]]) -> str:
     return buf.getvalue()
 
 
+def _split_budgets(runs: list[RunSummary], grid: dict[tuple[str, str], int]
+                   ) -> tuple[list[RunSummary], list[RunSummary]]:
+    """(runs at their cell's budget or recording none, runs at another): a cell never mixes budgets."""
+    other = [r for r in runs if r.budget is not None and r.budget != grid.get((r.task, r.variant), r.budget)]
+    return [r for r in runs if r not in other], other
+
+
 def write_report(sweep_dir: str | Path, out: str | Path | None = None, bins: int = 40,
                  sweep: str | Path | None = None, notes: list[str] | None = None) -> dict[str, Path]:
     """Write ``results.md`` (tables), ``results.csv`` (per run and aggregated), ``curves.csv`` and one
@@ -350,7 +358,9 @@ def write_report(sweep_dir: str | Path, out: str | Path | None = None, bins: int
     seeds, for a folder that several sweeps have run into; by default the layout comes from the
     folder's ``sweep.yaml`` (the last sweep run there) and every run found is reported. A run short of
     the budget its ``config.yaml`` records (a sweep still running, or interrupted) is left out of the
-    tables and curves, and ``results.md`` names it (as does a line added to ``notes``, where given).
+    tables and curves, and ``results.md`` names it (as does a line added to ``notes``, where given); so is
+    a run trained at another budget than its cell's (the grid's, or without ``sweep`` the one most of the
+    cell's runs record).
     """
     sweep_dir = Path(sweep_dir)
     if not sweep_dir.is_dir():
@@ -365,17 +375,18 @@ def write_report(sweep_dir: str | Path, out: str | Path | None = None, bins: int
         table = spec.table
         runs = [r for r in runs if r.task in tasks and r.variant in variants and r.seed in spec.seeds]
         grid = {(column_folder(t.name), v.name): v.steps or t.steps for t in spec.tasks for v in spec.variants}
-        other = [r for r in runs if r.budget is not None and r.budget != grid[(r.task, r.variant)]]
-        runs = [r for r in runs if r not in other]      # another budget than the grid's: never mixed into a cell
-    else:
-        grid, other = {}, []
+        runs, other = _split_budgets(runs, grid)
     unfinished = [r for r in runs if not r.finished]     # a sweep still running, or stopped: not in the tables
     runs = [r for r in runs if r.finished]
+    if sweep is None:   # each cell's budget: the one most of its finished runs record (the larger on a tie)
+        counts = Counter((r.task, r.variant, r.budget) for r in runs if r.budget is not None)
+        runs, other = _split_budgets(runs, {(t, v): b for (t, v, b), _ in sorted(
+            counts.items(), key=lambda kv: (kv[1], kv[0][2]))})
     if not runs:
         raise ReportError(f"{sweep_dir}: no finished runs (expected <task>/<variant>/seed<k>/metrics.csv)"
                           f"{' of the grid ' + str(sweep) if sweep is not None else ''}"
                           f"{f', {len(unfinished)} still short of their budget' if unfinished else ''}"
-                          f"{f', {len(other)} trained at another budget than the grid' if other else ''}; "
+                          f"{f', {len(other)} trained at another budget than their cell' if other else ''}; "
                           "run `hubsgo sweep` (again) first")
     if sweep is None:
         tasks, variants, labels, table = _layout(sweep_dir)
@@ -401,9 +412,9 @@ def write_report(sweep_dir: str | Path, out: str | Path | None = None, bins: int
     if other:
         what = ", ".join(f"{r.task}/{r.variant}/seed{r.seed} at {r.budget:,}" for r in
                          sorted(other, key=lambda r: (r.task, r.variant, r.seed)))
-        md += ["", f"Left out, trained at another budget than the grid's ({len(other)}): {what} env steps."]
+        md += ["", f"Left out, trained at another budget than their cell's ({len(other)}): {what} env steps."]
         if notes is not None:
-            notes.append(f"left out {len(other)} run(s) trained at another budget than the grid's (results.md "
+            notes.append(f"left out {len(other)} run(s) trained at another budget than their cell's (results.md "
                          "names them); a cell never mixes budgets")
     paths: dict[str, Path] = {"table": write_text(out / "results.md", "\n".join(md))}
 

@@ -180,12 +180,34 @@ def test_with_a_grid_a_run_trained_at_another_budget_is_left_out_and_named(sweep
     kept = [expected[("ppo", "keydoor")][k] for k in (0, 2)]
     assert m == pytest.approx(statistics.fmean(kept), abs=5e-5)
     assert s == pytest.approx(statistics.stdev(kept) / math.sqrt(2), abs=5e-5)
-    assert "trained at another budget than the grid's (1): keydoor/ppo/seed1 at 800 env steps" in text
+    assert "trained at another budget than their cell's (1): keydoor/ppo/seed1 at 800 env steps" in text
     assert any("another budget" in n for n in notes)
     grid["seeds"] = [1]                              # every run at another budget: the error says so
     path.write_text(yaml.safe_dump(grid))
     with pytest.raises(ReportError, match="no finished runs.*1 trained at another budget"):
         write_report(root, out=tmp_path / "rep2", sweep=path)
+
+
+def test_without_a_grid_a_cell_keeps_the_budget_most_of_its_finished_runs_record(sweep_dir, tmp_path):
+    """No --sweep: a run trained at another budget than most of its cell's (a trial run into the same
+    folder) is left out and named; on a tie the larger budget is kept."""
+    root, expected = sweep_dir
+    cell = root / "keydoor" / "ppo"
+    for seed, steps in ((0, 1000), (1, 800), (2, 1000)):
+        (cell / f"seed{seed}" / "config.yaml").write_text(yaml.safe_dump({"hyper": {"steps": steps}}))
+    text = write_report(root, out=tmp_path / "rep")["table"].read_text()
+    line = next(l for l in text.split("The paper's")[0].splitlines() if l.startswith("| PPO |"))
+    m, _ = map(float, re.fullmatch(r"(\S+) ± (\S+)", line.strip("|").split("|")[2].strip()).groups())
+    assert m == pytest.approx(statistics.fmean(expected[("ppo", "keydoor")][k] for k in (0, 2)), abs=5e-5)
+    assert "another budget than their cell's (1): keydoor/ppo/seed1 at 800 env steps" in text
+    (cell / "seed2" / "config.yaml").write_text(yaml.safe_dump({"hyper": {"steps": 800}}))
+    (cell / "seed0" / "config.yaml").unlink()                # no budget recorded: never left out
+    text = write_report(root, out=tmp_path / "rep2")["table"].read_text()
+    assert "Left out, trained at another budget" not in text
+    (cell / "seed0" / "config.yaml").write_text(yaml.safe_dump({"hyper": {"steps": 1000}}))
+    (cell / "seed1").rename(tmp_path / "moved")               # one run at 1000, one at 800: the larger is kept
+    text = write_report(root, out=tmp_path / "rep3")["table"].read_text()
+    assert "(1): keydoor/ppo/seed2 at 800 env steps" in text
 
 
 def test_steps_to_success_is_the_first_episode_end_where_the_rolling_rate_reaches_the_threshold():
