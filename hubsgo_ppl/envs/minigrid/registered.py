@@ -114,21 +114,20 @@ def _quiet_reset(env: Any, seed: int | None, options: dict[str, Any] | None = No
         env.reset(seed=seed, options=options)
 
 
-def _probe(gym_id: str, source: str, kwargs: dict[str, Any], kinds: tuple[Kind, ...], actions: list[str]
-           ) -> list[str] | None:
+def _probe(gym_id: str, source: str, kwargs: dict[str, Any], kinds: tuple[Kind, ...], actions: list[str],
+           goal_pays: bool) -> list[str] | None:
     """Refuse, in one line, an env that cannot generate a layout, and a sub-goal whose type of object is in
     none of ``PROBE_RESETS`` seeded layouts (on the floor, in a box or carried at reset); warn, once, where
     the type is there but never in the colour (or lock) the sub-goal names, as environments that draw
     colours at random may have it in other layouts. Resets an env of its own: the caller's is untouched.
 
-    Returns what :func:`_check_actions` refuses where ``actions`` reach the goal square (:mod:`.reach`) in
-    none of the layouts that have one and the environment pays for nothing else (DoorKey without
-    ``toggle``): the actions that would (``["a way through"]`` where none would); else None."""
+    Where the goal square pays (``goal_pays``) and ``actions`` reach it (:mod:`.reach`) in none of the
+    layouts that have one (DoorKey without ``toggle``), returns what :func:`_check_actions` refuses: the
+    actions that would reach it (empty where none would); else None."""
     wanted = [(i, k, what, match) for i, k in enumerate(kinds) for what, match in k.selects]
     env, seen = _inner(gym_id, source, **kwargs), set()
-    # None: settled (a goal square reached, or the env pays on an action of its own: Unlock's toggle);
-    # []: no layout probed yet; else what the layouts with a goal square, all unreached, would need
-    blocked: list[str] | None = None if rewarded_actions(type(env)) else []
+    # what the first layout whose goal square is out of reach would need; None while there is none
+    missing: list[str] | None = None
     try:
         for seed in range(PROBE_RESETS):
             try:
@@ -137,13 +136,13 @@ def _probe(gym_id: str, source: str, kwargs: dict[str, Any], kinds: tuple[Kind, 
                 raise SpecError(f"{source}: options.gym_id: {gym_id!r} could not generate a layout "
                                 f"({type(exc).__name__}: {' '.join(str(exc).split())}); use a MiniGrid id "
                                 "whose dependencies are installed") from None
-            if blocked is not None:
-                reached = goal_reachable(env, actions)
-                if reached is False and not blocked:
-                    blocked = missing_for_goal(env, actions) or ["a way through"]
-                elif reached or (reached is None and not blocked):     # None: a layout with no goal square
-                    blocked = None
-            if not wanted and blocked is None:
+            if goal_pays:
+                reached = goal_reachable(env, actions)      # None: a layout with no goal square
+                if reached is False and missing is None:
+                    missing = missing_for_goal(env, actions)
+                elif reached or missing is None:
+                    goal_pays = False       # settled: a goal square in reach, or layouts without one
+            if not wanted and not goal_pays:
                 return None
             s = new_scene(env.grid, tuple(env.agent_pos), env.carrying)
             objs = [o for o, _ in s.objects] + [o.contains for o, _ in s.objects
@@ -153,8 +152,9 @@ def _probe(gym_id: str, source: str, kwargs: dict[str, Any], kinds: tuple[Kind, 
             wanted = [(i, k, what, m) for i, k, what, m in wanted if not any(m(s, o) for o in objs)]
     finally:
         env.close()
+    blocked = missing if goal_pays else None
     if not wanted:
-        return blocked or None
+        return blocked
     types = {entry.split()[-1] for entry in seen}
     for i, k, what, _ in wanted:
         article = "an" if what[0] in "aeiou" else "a"
@@ -168,7 +168,7 @@ def _probe(gym_id: str, source: str, kwargs: dict[str, Any], kinds: tuple[Kind, 
                 print(f"hubsgo: warning: {line}; it holds only in layouts that have one", file=sys.stderr)
             continue
         raise SpecError(f"{line}; change its args or drop it")
-    return blocked or None
+    return blocked
 
 
 #: the probe's warnings already printed in this process (an env is built for each run, evaluation, seed)
@@ -204,24 +204,23 @@ def rewarded_actions(env_class: type) -> list[str]:
     return list(dict.fromkeys(found))
 
 
-def _check_actions(env: Any, actions: list[str], kinds: tuple[Kind, ...], gym_id: str, source: str,
+def _check_actions(paid: list[str], actions: list[str], kinds: tuple[Kind, ...], gym_id: str, source: str,
                    blocked: list[str] | None = None) -> None:
     """Refuse, in one line, an action set that cannot reach a sub-goal or the environment's success: no
     ``forward``; a kind's action (``NEEDS``) missing; an action the environment's own ``step`` rewards
-    missing (:func:`rewarded_actions`: Unlock pays on ``toggle``, GoToDoor on ``done``); or, ``blocked``
-    (:func:`_probe`), no probed layout whose goal square the actions reach."""
+    missing (``paid``, :func:`rewarded_actions`: Unlock pays on ``toggle``, GoToDoor on ``done``); or,
+    ``blocked`` (:func:`_probe`), no probed layout whose goal square the actions reach."""
     have = set(actions)
     needed = [("forward", "the agent could not move")] + [
         (a, f"subgoals[{i}] ({k.name}) is a {k.kind} sub-goal") for i, k in enumerate(kinds) for a in NEEDS.get(k.kind, ())]
-    needed += [(a, f"{gym_id} rewards the {a} action") for a in rewarded_actions(type(env))]
+    needed += [(a, f"{gym_id} rewards the {a} action") for a in paid]
     for action, why in needed:
         if action not in have:
             raise SpecError(f"{source}: options.actions: {action!r} is missing and {why}; add {action} to "
                             f"options.actions (now {actions})")
-    if blocked:
-        add = " and ".join(a for a in blocked if a != "a way through")
-        hint = (f"add {add} to options.actions (doors, keys or objects stand between the agent and the goal)"
-                if add else "walls or lava cut the agent off from the goal in every one")
+    if blocked is not None:
+        hint = (f"add {' and '.join(blocked)} to options.actions (doors, keys or objects stand between the agent "
+                "and the goal)" if blocked else "walls or lava cut the agent off from the goal in every one")
         raise SpecError(f"{source}: options.actions: with {actions} the agent can reach the goal square in none of "
                         f"{PROBE_RESETS} seeded layouts of {gym_id}; {hint}")
 
@@ -266,8 +265,10 @@ class RegisteredEnv(gym.Env):
         self._marks: tuple[Kind, ...] = self._kinds if cat.observed is None else tuple(
             compile_kind(i, sg, source) for i, sg in enumerate(marks))
         self._mark_cols = np.array([[sg.name for sg in marks].index(n) for n in self.subgoal_names], np.int64)
-        blocked = _probe(opts.gym_id, source, {"max_steps": steps} if steps else {}, self._kinds, opts.actions)
-        _check_actions(self.inner, opts.actions, self._kinds, opts.gym_id, source, blocked)
+        paid = rewarded_actions(type(self.inner))     # actions the env's own step pays on (none: the goal square)
+        blocked = _probe(opts.gym_id, source, {"max_steps": steps} if steps else {}, self._kinds, opts.actions,
+                         goal_pays=not paid)
+        _check_actions(paid, opts.actions, self._kinds, opts.gym_id, source, blocked)
         self._action_map = tuple(Actions[a] for a in opts.actions)
         self.action_names = list(opts.actions)
         self.action_space = spaces.Discrete(len(self._action_map))
