@@ -80,3 +80,20 @@ def test_a_place_option_alone_picks_carries_and_releases(arm_env, achieved):
                 break
         assert info["subgoals"][i], goal
     assert info["is_success"] and {"grasp_red", "grasp_green"} <= seen
+
+
+def test_robosuite_installation_notices_are_dropped_and_its_other_messages_kept(catalogue):
+    """Importing the arm tasks and building one prints none of robosuite's notices about its own
+    installation (five lines before every refusal), while any other robosuite message still shows."""
+    import subprocess
+    import sys
+
+    code = ("import logging\n"
+            "from hubsgo_ppl.envs.robosuite import make_robosuite_task\n"
+            f"make_robosuite_task({str(catalogue('push_any_one'))!r}).close()\n"
+            "logging.getLogger('robosuite_logs').warning('a real robosuite warning')\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert "macro file" not in out.stderr and "robosuite_models" not in out.stderr
+    assert "mink" not in out.stderr and "controller configuration" not in out.stderr
+    assert "a real robosuite warning" in out.stderr
