@@ -40,7 +40,7 @@ class CollectThreeBalls(SubgoalManipulationEnv):
 
     ## Termination
 
-    Terminated on success; truncated after ``horizon`` control steps (default 600).
+    Terminated on success; truncated after ``horizon`` control steps (500 where the catalogue does not set it).
 
     ## Randomisation (seeded by ``reset(seed=...)``)
 

@@ -38,7 +38,7 @@ class PushAnyOne(SubgoalManipulationEnv):
 
     ## Termination
 
-    Terminated on success; truncated after ``horizon`` control steps (default 300).
+    Terminated on success; truncated after ``horizon`` control steps (500 where the catalogue does not set it).
 
     ## Randomisation (seeded by ``reset(seed=...)``)
 

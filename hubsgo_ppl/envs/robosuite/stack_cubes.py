@@ -40,7 +40,7 @@ class StackCubes(SubgoalManipulationEnv):
 
     ## Termination
 
-    Terminated on success; truncated after ``horizon`` control steps (default 400).
+    Terminated on success; truncated after ``horizon`` control steps (500 where the catalogue does not set it).
 
     ## Randomisation (seeded by ``reset(seed=...)``)
 
