@@ -39,3 +39,31 @@ def test_overrides_parse_yaml_values_at_any_depth_and_leave_the_input_alone():
 def test_bad_overrides_name_the_problem(item, message):
     with pytest.raises(ValueError, match=message):
         apply_overrides(preset("minigrid"), [item])
+
+
+@pytest.mark.mujoco
+def test_a_users_arm_task_trains_for_the_familys_episodes_at_its_horizon(tmp_path):
+    """A robosuite catalogue with no budget of its own gets 100 episodes of its horizon (the catalogue's,
+    ``--set env.horizon``'s, else the scenes' 500); the shipped tasks keep theirs, and a budget given with
+    ``--steps`` or ``--set steps`` wins."""
+    from hubsgo_ppl.experiments.resolve import resolve
+    from hubsgo_ppl.experiments.resolved import RunConfig
+
+    def catalogue(name, horizon):
+        path = tmp_path / f"{name}.yaml"
+        path.write_text(f"task: {name}\nfamily: robosuite\noptions:\n  env_class: StackCubes\n  cubes: [blue]\n"
+                        + (f"  horizon: {horizon}\n" if horizon else "")
+                        + "subgoals:\n  - {name: grasp_blue, kind: grasp, args: {object: blue}}\n")
+        return str(path)
+
+    def budget(task, **kw):
+        return resolve(RunConfig(task=task, graph="independent", **kw))["hyper"]["steps"]
+
+    short, unset = catalogue("short", 150), catalogue("unset", None)
+    assert budget(short) == 15_000 and budget(short, low_level="learned") == 15_000
+    assert budget(unset) == 50_000
+    assert budget(short, overrides=["env.horizon=80"]) == 8_000
+    assert budget(short, steps=1_234) == 1_234 and budget(short, overrides=["steps=999"]) == 999
+    assert budget("stack_cubes") == 20_000 and budget("push_any_one") == 8_000
+    assert budget("keydoor") == 40_000          # a maze family counts in env steps
+    assert resolve(RunConfig(task=short, agent="hiro"))["hyper"]["steps"] == 15_000    # every agent alike

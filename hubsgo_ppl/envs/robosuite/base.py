@@ -34,6 +34,7 @@ from robosuite.utils.placement_samplers import ObjectPositionSampler, Sequential
 
 from ...specs import SpecError
 from ..subgoals import Catalogue, SubgoalDef
+from .options import DEFAULT_HORIZON
 
 __all__ = ["SubgoalManipulationEnv", "SubgoalKind", "osc_position_controller", "set_sampler_rng"]
 
@@ -121,7 +122,7 @@ class SubgoalManipulationEnv(ManipulationEnv):
         catalogue: Catalogue,
         robots: str = "Panda",
         placement_initializer: ObjectPositionSampler | None = None,
-        horizon: int = 500,
+        horizon: int = DEFAULT_HORIZON,
         control_freq: int = 20,
         seed: int | None = None,
         initialization_noise: Any = "default",

@@ -9,7 +9,7 @@ from typing import Any, Callable
 
 from ...specs import SpecError
 
-__all__ = ["COLOURS", "POSITIVE", "colour_option", "listed_option", "positive_options"]
+__all__ = ["COLOURS", "DEFAULT_HORIZON", "POSITIVE", "colour_option", "listed_option", "positive_options"]
 
 #: the cube colours a catalogue may name (``options.colours`` of PushAnyOne, ``options.cubes`` of StackCubes)
 COLOURS = {"red": (1, 0, 0, 1), "green": (0, 1, 0, 1), "blue": (0, 0, 1, 1), "yellow": (1, 1, 0, 1),
@@ -32,6 +32,9 @@ def colour_option(catalogue: Any, key: str, value: Any, most: int) -> tuple[str,
     return listed_option(catalogue, key, value, most, lambda c: isinstance(c, str) and c in COLOURS,
                          f"colours of: {', '.join(COLOURS)}")
 
+
+#: control steps before truncation where the catalogue does not set ``horizon``
+DEFAULT_HORIZON = 500
 
 #: the numeric options of a robosuite catalogue -> whether it counts (a whole number) and its unit
 POSITIVE = {"horizon": (True, "control steps"), "control_freq": (True, "control steps per second"),
