@@ -105,9 +105,9 @@ def _check_env_keys(cfg: RunConfig, info: Any) -> None:
                            f"{', '.join(keys)}")
 
 
-def _episode_budget(info: Any, hyper: Mapping[str, Any]) -> int | None:
+def _episode_budget(info: Any, hyper: Mapping[str, Any]) -> tuple[int, int] | None:
     """The budget of a run that gives none, where its family counts budgets in episodes and the task has
-    no budget of its own: the family's episodes at the task's horizon (``--set env.horizon``, else the
+    no budget of its own: the family's episodes and the task's horizon (``--set env.horizon``, else the
     catalogue's, else the scene's default). None where the family's ``steps`` stand."""
     episodes = FAMILIES[info.family].episodes if info.family in FAMILIES else None
     if episodes is None or "steps" in TASK_PRESETS.get(info.name, {}):
@@ -115,7 +115,7 @@ def _episode_budget(info: Any, hyper: Mapping[str, Any]) -> int | None:
     from ..envs.robosuite.options import DEFAULT_HORIZON
 
     horizon = hyper.get("env", {}).get("horizon", info.catalogue.options.get("horizon", DEFAULT_HORIZON))
-    return int(episodes) * int(horizon)
+    return int(episodes), int(horizon)
 
 
 def resolve(cfg: RunConfig) -> dict[str, Any]:
@@ -140,11 +140,13 @@ def resolve_run(cfg: RunConfig) -> ResolvedRun:
     try:        # the preset, the task's settings and --set merged and validated (agents/config.py)
         hyper = resolve_hyper(info.family, info.name, cfg.agent, cfg.overrides, steps=cfg.steps,
                               low_level=cfg.low_level)
-        if cfg.steps is None and not budget_set:
-            budget = _episode_budget(info, hyper)
-            if budget is not None:
-                hyper = resolve_hyper(info.family, info.name, cfg.agent, cfg.overrides, steps=budget,
-                                      low_level=cfg.low_level)
+        episodes = _episode_budget(info, hyper) if cfg.steps is None and not budget_set else None
+        if episodes is not None:
+            count, horizon = episodes
+            hyper = resolve_hyper(info.family, info.name, cfg.agent, cfg.overrides, steps=count * horizon,
+                                  low_level=cfg.low_level)
+            print(f"hubsgo: note: no --steps: {count * horizon:,} env steps, the {info.family} family's {count} "
+                  f"episodes of the task's {horizon}-step horizon", file=sys.stderr)
     except ValueError as exc:           # a ConfigError always; another ValueError where --set caused it
         if not (cfg.overrides or isinstance(exc, ConfigError)):
             raise

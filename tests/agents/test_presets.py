@@ -42,7 +42,7 @@ def test_bad_overrides_name_the_problem(item, message):
 
 
 @pytest.mark.mujoco
-def test_a_users_arm_task_trains_for_the_familys_episodes_at_its_horizon(tmp_path):
+def test_a_users_arm_task_trains_for_the_familys_episodes_at_its_horizon(tmp_path, capsys):
     """A robosuite catalogue with no budget of its own gets 100 episodes of its horizon (the catalogue's,
     ``--set env.horizon``'s, else the scenes' 500); the shipped tasks keep theirs, and a budget given with
     ``--steps`` or ``--set steps`` wins."""
@@ -61,9 +61,13 @@ def test_a_users_arm_task_trains_for_the_familys_episodes_at_its_horizon(tmp_pat
 
     short, unset = catalogue("short", 150), catalogue("unset", None)
     assert budget(short) == 15_000 and budget(short, low_level="learned") == 15_000
+    assert "no --steps: 15,000 env steps, the robosuite family's 100 episodes of the task's 150-step horizon" in (
+        capsys.readouterr().err)
     assert budget(unset) == 50_000
     assert budget(short, overrides=["env.horizon=80"]) == 8_000
+    capsys.readouterr()
     assert budget(short, steps=1_234) == 1_234 and budget(short, overrides=["steps=999"]) == 999
+    assert "no --steps" not in capsys.readouterr().err
     assert budget("stack_cubes") == 20_000 and budget("push_any_one") == 8_000
     assert budget("keydoor") == 40_000          # a maze family counts in env steps
     assert resolve(RunConfig(task=short, agent="hiro"))["hyper"]["steps"] == 15_000    # every agent alike
