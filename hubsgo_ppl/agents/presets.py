@@ -59,9 +59,10 @@ FAMILIES: dict[str, FamilyDefaults] = {
              "ppo": {"learning_rate": 3e-4, "n_steps": 1024, "batch_size": 64, "n_epochs": 4, "gamma": 0.99,
                      "ent_coef": 0.01, "policy_kwargs": {"net_arch": [128, 128]}}}),
     # The shipped tasks' budgets are their own (TASK_PRESETS); a user's arm task trains for 100 episodes of
-    # its horizon, as many as the shipped tasks need with either low level (docs/arms.md)
+    # its horizon, as many as the shipped tasks need with either low level (docs/arms.md): ``steps`` is
+    # that budget at the scenes' default horizon, 500
     "robosuite": FamilyDefaults(
-        steps=20_000, episodes=100, low_level="scripted", loop=LoopConfig.robosuite(), high=HighLevelConfig.robosuite(),
+        steps=50_000, episodes=100, low_level="scripted", loop=LoopConfig.robosuite(), high=HighLevelConfig.robosuite(),
         low=ScriptedOSCConfig(), hiro=HIROConfig.robosuite(), higl=HIGLConfig.robosuite(),
         # the learned low level moves more slowly than the scripted controller: a pick-and-carry takes it
         # 90-115 steps where the scripted one takes at most 45 (docs/results.md, "robosuite arm tasks")
