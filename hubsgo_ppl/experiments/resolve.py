@@ -109,7 +109,7 @@ def _episode_budget(info: Any, hyper: Mapping[str, Any]) -> tuple[int, int] | No
     """The budget of a run that gives none, where its family counts budgets in episodes and the task has
     no budget of its own: the family's episodes and the task's horizon (``--set env.horizon``, else the
     catalogue's, else the scene's default). None where the family's ``steps`` stand."""
-    episodes = FAMILIES[info.family].episodes if info.family in FAMILIES else None
+    episodes = FAMILIES[info.family].episodes      # the family is known: resolve_hyper read its preset
     if episodes is None or "steps" in TASK_PRESETS.get(info.name, {}):
         return None
     from ..envs.robosuite.options import DEFAULT_HORIZON
