@@ -12,7 +12,7 @@ from typing import Any, Sequence
 
 from pydantic import create_model
 
-from .presets import FAMILIES, apply_overrides, preset
+from .presets import FAMILIES, OTHER_LOW_STEPS, apply_overrides, preset
 from .settings import (DERIVED, ConfigError, choice, GoalDQNConfig, GoalTD3Config, HighLevelConfig, HIGLConfig, HIROConfig, LoopConfig,
                        ScriptedMazeConfig, ScriptedOSCConfig, Settings, integer, sb3_model, validate)
 
@@ -117,6 +117,9 @@ def resolve_hyper(family: str, task: str | None, agent: str, overrides: list[str
         given = set_keys(overrides, "low")
         hyper["low"] = {k: v for k, v in hyper["low"].items() if k in given}
         base = {**base, "low": {k: v for k, v in base["low"].items() if k in given}}
+        if steps is None and task in OTHER_LOW_STEPS and not any(o.partition("=")[0].strip() == "steps"
+                                                                 for o in overrides):
+            hyper["steps"] = base["steps"] = OTHER_LOW_STEPS[task]
         other = {k: v for k, v in FAMILIES[family].other_low_loop.items() if k not in set_keys(overrides, "loop")}
         if other:
             hyper["loop"] = {**hyper.get("loop", {}), **other}

@@ -71,3 +71,20 @@ def test_a_users_arm_task_trains_for_the_familys_episodes_at_its_horizon(tmp_pat
     assert budget("stack_cubes") == 20_000 and budget("push_any_one") == 8_000
     assert budget("keydoor") == 40_000          # a maze family counts in env steps
     assert resolve(RunConfig(task=short, agent="hiro"))["hyper"]["steps"] == 15_000    # every agent alike
+
+
+def test_the_shipped_arm_tasks_take_the_learned_low_levels_measured_budgets():
+    """With the learned low level a shipped arm task trains for the budget its table was measured at; the
+    scripted controller keeps the task's own, and ``--steps`` or ``--set steps`` wins over both."""
+    from hubsgo_ppl.agents.config import resolve_hyper
+
+    def budget(task, **kw):
+        return resolve_hyper("robosuite", task, "hubsgo", **kw)["steps"]
+
+    assert [budget(t, low_level="learned") for t in ("push_any_one", "stack_cubes", "collect_three_balls")] == [
+        15_000, 25_000, 50_000]
+    assert [budget(t) for t in ("push_any_one", "stack_cubes", "collect_three_balls")] == [8_000, 20_000, 12_000]
+    assert budget("stack_cubes", low_level="scripted") == 20_000
+    assert budget("stack_cubes", low_level="learned", steps=3_000) == 3_000
+    assert budget("stack_cubes", low_level="learned", overrides=["steps=4000"]) == 4_000
+    assert resolve_hyper("robosuite", "stack_cubes", "hdqn", low_level="learned")["steps"] == 25_000
