@@ -22,9 +22,10 @@ ROBOSUITE_SKIP = ("robosuite is not installed: the arm-task tests are skipped (i
 
 @functools.lru_cache(maxsize=None)
 def _robosuite_import_error() -> str | None:
-    """None if robosuite imports, else the error (imported at most once per run)."""
+    """None if robosuite imports, else the error (imported at most once per run). Imported through the
+    package, whose logging filter then drops robosuite's installation notices from the test output too."""
     try:
-        importlib.import_module("robosuite")
+        importlib.import_module("hubsgo_ppl.envs.robosuite")
     except Exception as exc:  # noqa: BLE001 - any failure to import is reported as it is
         return f"{type(exc).__name__}: {exc}"
     return None
