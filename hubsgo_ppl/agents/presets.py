@@ -58,9 +58,9 @@ FAMILIES: dict[str, FamilyDefaults] = {
                      "exploration_final_eps": 0.05, "gamma": 0.99, "policy_kwargs": {"net_arch": [256, 256]}},
              "ppo": {"learning_rate": 3e-4, "n_steps": 1024, "batch_size": 64, "n_epochs": 4, "gamma": 0.99,
                      "ent_coef": 0.01, "policy_kwargs": {"net_arch": [128, 128]}}}),
-    # The shipped tasks' budgets are their own (TASK_PRESETS); a user's arm task trains for 100 episodes of
-    # its horizon, as many as the shipped tasks need with either low level (docs/arms.md): ``steps`` is
-    # that budget at the scenes' default horizon, 500
+    # The shipped tasks' budgets are their own (TASK_PRESETS; OTHER_LOW_STEPS with the learned low
+    # level); a user's arm task trains for 100 episodes of its horizon, as many as the shipped tasks need
+    # with either low level (docs/arms.md): ``steps`` is that budget at the scenes' default horizon, 500
     "robosuite": FamilyDefaults(
         steps=50_000, episodes=100, low_level="scripted", loop=LoopConfig.robosuite(), high=HighLevelConfig.robosuite(),
         low=ScriptedOSCConfig(), hiro=HIROConfig.robosuite(), higl=HIGLConfig.robosuite(),
