@@ -32,6 +32,7 @@ no other can (:func:`callable_ref`).
 from __future__ import annotations
 
 import importlib
+import inspect
 import itertools
 from pathlib import Path
 from typing import Any, Callable, ClassVar
@@ -151,10 +152,34 @@ def _test(sg: SubgoalDef, source: str) -> Callable[[Any, Any, dict, bool], bool]
         key = sg.args["key"]
         if len(sg.args) > 1:
             raise SpecError(f"{where}: kind info takes only args.key")
-        return lambda env, obs, info, success: bool(info.get(key, False))
+        return lambda env, obs, info, success: _truth(info.get(key, False), f"{where}: info[{key!r}]",
+                                                        "an info sub-goal reads a key that holds a bool")
     fn = load_callable(sg.args["fn"], f"{where}: args.fn")
     rest = {k: v for k, v in sg.args.items() if k != "fn"}
-    return lambda env, obs, info, success: bool(fn(env, obs, info, **rest))
+    _check_call(fn, rest, f"{where}: args.fn {sg.args['fn']!r}")
+    return lambda env, obs, info, success: _truth(fn(env, obs, info, **rest), f"{where}: args.fn {sg.args['fn']!r}")
+
+
+def _check_call(fn: Callable[..., Any], rest: dict[str, Any], where: str) -> None:
+    """Refuse, in one line, a predicate that cannot be called as ``fn(env, obs, info, **rest)``."""
+    try:
+        signature = inspect.signature(fn)
+    except (TypeError, ValueError):     # a builtin without a signature: called as it is
+        return
+    try:
+        signature.bind(None, None, None, **rest)
+    except TypeError as exc:
+        call = ", ".join(["env", "obs", "info"] + [f"{k}=..." for k in rest])
+        raise SpecError(f"{where} cannot be called as fn({call}) ({exc}); a predicate takes the env, its "
+                        "observation and its info, then the sub-goal's other args by name") from None
+
+
+def _truth(value: Any, where: str, fix: str = "return a bool, e.g. bool(x.any()) or bool(x.all())") -> bool:
+    """``value`` as one truth value; a :class:`SpecError` for a numpy array of other than one element,
+    which has none."""
+    if isinstance(value, np.ndarray) and value.size != 1:
+        raise SpecError(f"{where} gave an array of {value.size} elements, not one truth value; {fix}")
+    return bool(value)
 
 
 def _build(options: GymOptions, source: str, kwargs: dict[str, Any]) -> gym.Env:

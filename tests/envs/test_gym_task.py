@@ -186,3 +186,29 @@ def test_a_text_observation_is_flattened_and_a_sequence_refused(space, flattened
     else:
         with pytest.raises(SpecError, match="t.yaml: the env's observation space .* cannot be flattened"):
             _flat_space(space, "t.yaml")
+
+
+def _two_args(env, obs):
+    return True
+
+
+def _several(env, obs, info):
+    return np.array([True, False])
+
+
+@pytest.mark.parametrize("subgoal, fragment", [
+    ({"kind": "predicate", "args": {"fn": f"{__name__}:_two_args"}}, "cannot be called as fn(env, obs, info)"),
+    ({"kind": "predicate", "args": {"fn": "corridor_env:switch_on", "whch": "a"}},
+     "cannot be called as fn(env, obs, info, whch=...)"),
+    ({"kind": "predicate", "args": {"fn": f"{__name__}:_several"}}, "gave an array of 2 elements"),
+    ({"kind": "info", "args": {"key": "action_mask"}}, "info['action_mask'] gave an array of 6 elements"),
+])
+def test_a_predicate_of_another_signature_or_an_array_is_one_line_exit_2(tmp_path, corridor, capsys, subgoal,
+                                                                         fragment):
+    from hubsgo_ppl.cli import main
+
+    options = {"gym_id": "Taxi-v4"} if subgoal["kind"] == "info" else {}
+    path = _catalogue(tmp_path, [{"name": "g", **subgoal}, {"name": "goal", "kind": "goal"}], **options)
+    assert main(["check-env", str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and fragment in err[0] and "sub-goal 'g'" in err[0] and "unexpected" not in err[0], err
