@@ -190,14 +190,43 @@ def _build(options: GymOptions, source: str, kwargs: dict[str, Any]) -> gym.Env:
     if options.gym_id is not None:
         limit = {} if options.max_episode_steps is None else {"max_episode_steps": options.max_episode_steps}
         try:
+            spec = gym.spec(options.gym_id)
+            if kwargs and isinstance(spec.entry_point, str):
+                creator = gym.envs.registration.load_env_creator(spec.entry_point)
+                own = {k: v for k, v in kwargs.items() if k not in inspect.signature(gym.make).parameters}
+                _check_kwargs(creator, {**spec.kwargs, **own}, source, options.gym_id)
             return gym.make(options.gym_id, **limit, **kwargs)
         except (gym.error.Error, ModuleNotFoundError) as exc:
             raise SpecError(f"{source}: options.gym_id: {' '.join(str(exc).split())[:300]}") from None
-    env = load_callable(options.entry_point, f"{source}: options.entry_point")(**kwargs)
+    factory = load_callable(options.entry_point, f"{source}: options.entry_point")
+    _check_kwargs(factory, kwargs, source, options.entry_point)
+    try:
+        env = factory(**kwargs)
+    except TypeError as exc:            # a factory that passes **kwargs on to a constructor that refuses one
+        if not any(f"keyword argument {k!r}" in str(exc) for k in kwargs):
+            raise
+        raise _kwargs_error(source, options.entry_point, kwargs, exc) from None
     if not isinstance(env, gym.Env):
         raise SpecError(f"{source}: options.entry_point {options.entry_point!r} returned a {type(env).__name__}, "
                         "not a gymnasium.Env")
     return env if options.max_episode_steps is None else gym.wrappers.TimeLimit(env, options.max_episode_steps)
+
+
+def _check_kwargs(creator: Callable[..., Any], kwargs: dict[str, Any], source: str, name: str) -> None:
+    """Refuse, in one line, keyword arguments the env's constructor does not take."""
+    try:
+        signature = inspect.signature(creator)
+    except (TypeError, ValueError):     # no signature to read: the constructor says it itself
+        return
+    try:
+        signature.bind(**kwargs)
+    except TypeError as exc:
+        raise _kwargs_error(source, name, kwargs, exc) from None
+
+
+def _kwargs_error(source: str, name: str, kwargs: dict[str, Any], exc: Exception) -> SpecError:
+    return SpecError(f"{source}: options.kwargs: {name} cannot be built with {sorted(kwargs)} ({exc}); pass only "
+                     "the keyword arguments it takes, in options.kwargs or --set env.KEY=VALUE")
 
 
 def _flat_space(space: gym.Space, source: str) -> gym.spaces.Box | None:

@@ -212,3 +212,20 @@ def test_a_predicate_of_another_signature_or_an_array_is_one_line_exit_2(tmp_pat
     assert main(["check-env", str(path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and fragment in err[0] and "sub-goal 'g'" in err[0] and "unexpected" not in err[0], err
+
+
+def _passes_kwargs_on(**kwargs):
+    return gym.make("FrozenLake-v1", **kwargs)
+
+
+@pytest.mark.parametrize("options", [{"gym_id": "FrozenLake-v1", "kwargs": {"is_slipery": False}},
+                                     {"entry_point": "corridor_env:make_corridor", "kwargs": {"lenght": 9}},
+                                     {"entry_point": f"{__name__}:_passes_kwargs_on", "kwargs": {"is_slipery": False}}])
+def test_a_keyword_argument_the_env_does_not_take_is_one_line_exit_2(tmp_path, corridor, capsys, options):
+    from hubsgo_ppl.cli import main
+
+    path = _catalogue(tmp_path, [{"name": "goal", "kind": "goal"}], **options)
+    assert main(["check-env", str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    bad = next(iter(options["kwargs"]))
+    assert len(err) == 1 and "options.kwargs" in err[0] and f"keyword argument {bad!r}" in err[0], err
