@@ -34,6 +34,7 @@ from __future__ import annotations
 import importlib
 import inspect
 import itertools
+import sys
 from pathlib import Path
 from typing import Any, Callable, ClassVar
 
@@ -243,6 +244,19 @@ def _flat_space(space: gym.Space, source: str) -> gym.spaces.Box | None:
     return gym.spaces.Box(flat.low.astype(np.float32), flat.high.astype(np.float32), dtype=np.float32)
 
 
+#: the catalogues whose env has no time limit, already warned of in this process
+_NO_LIMIT_WARNED: set[str] = set()
+
+
+def _has_time_limit(env: gym.Env) -> bool:
+    """Whether a ``TimeLimit`` wraps ``env`` (``max_episode_steps`` of its registration or of the options)."""
+    while isinstance(env, gym.Wrapper):
+        if isinstance(env, gym.wrappers.TimeLimit):
+            return True
+        env = env.env
+    return False
+
+
 class GymTask(gym.Env):
     """The user's env (``options``) with the sub-goal contract of the catalogue's sub-goals.
 
@@ -269,6 +283,11 @@ class GymTask(gym.Env):
             raise
         self.observation_space = flat or self._space
         self._flatten = flat is not None
+        if not _has_time_limit(self.env) and source not in _NO_LIMIT_WARNED:
+            _NO_LIMIT_WARNED.add(source)
+            print(f"hubsgo: warning: {source}: the env has no time limit, so an episode lasts until the env ends it "
+                  "and a run can pass its step budget, or never end; set options.max_episode_steps "
+                  "(train_env's max_episode_steps)", file=sys.stderr)
         self.action_space = self.env.action_space
         self.metadata = dict(getattr(self.env, "metadata", {}) or {})
         self.render_mode = getattr(self.env, "render_mode", None)

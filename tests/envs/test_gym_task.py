@@ -229,3 +229,13 @@ def test_a_keyword_argument_the_env_does_not_take_is_one_line_exit_2(tmp_path, c
     err = capsys.readouterr().err.strip().splitlines()
     bad = next(iter(options["kwargs"]))
     assert len(err) == 1 and "options.kwargs" in err[0] and f"keyword argument {bad!r}" in err[0], err
+
+
+def test_an_env_without_a_time_limit_is_warned_of_once(tmp_path, corridor, capsys):
+    GymTask(_catalogue(tmp_path, [{"name": "goal", "kind": "goal"}])).close()       # max_episode_steps 30
+    assert "time limit" not in capsys.readouterr().err
+    path = _catalogue(tmp_path, [{"name": "goal", "kind": "goal"}], entry_point="corridor_env:make_corridor")
+    GymTask(path).close()
+    GymTask(path).close()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "has no time limit" in err[0] and "options.max_episode_steps" in err[0], err
