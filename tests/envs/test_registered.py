@@ -294,3 +294,19 @@ def test_every_kind_runs_on_environments_no_catalogue_here_was_written_for(tmp_p
                 assert 0 <= x < env.width and 0 <= y < env.height
             if terminated or truncated:
                 break
+
+
+def test_a_route_door_past_the_doors_of_every_seeded_layout_is_warned_of(tmp_path, capsys):
+    path = tmp_path / "rooms.yaml"
+    path.write_text(textwrap.dedent("""\
+        task: rooms
+        family: minigrid
+        options: {gym_id: MiniGrid-MultiRoom-N2-S4-v0, actions: [left, right, forward, toggle]}
+        subgoals:
+          - {name: door_1, kind: door_open, args: {route: 1}}
+          - {name: door_2, kind: door_open, args: {route: 2}}
+          - {name: goal, kind: goal}
+        """))
+    RegisteredEnv(str(path)).close()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "(door_2)" in err[0] and "number 2 on the way to the goal" in err[0], err

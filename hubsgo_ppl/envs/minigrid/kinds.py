@@ -432,6 +432,10 @@ def compile_kind(i: int, sg: Any, source: str) -> Kind:
     k = _compile(sg.name, sg.kind, args)
     if isinstance(args, _Selector) and not getattr(args, "cell", None):
         sel = ((_named(args), _matcher(args)),)
+        if isinstance(args, _DoorArgs) and args.route is not None:     # the k-th door on the way to the goal
+            nth, door = args.route, _matcher(args)
+            sel = ((f"{_named(args)} (number {nth} on the way to the goal)",
+                    lambda s, o: door(s, o) and len(s.route) >= nth and id(o) == s.route[nth - 1]),)
         if isinstance(args, _NearArgs):
             sel += ((_named(args.near), _matcher(args.near)),)
         k = Kind(k.name, k.kind, k.holds, k.target, sel)

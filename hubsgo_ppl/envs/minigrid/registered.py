@@ -160,7 +160,7 @@ def _probe(gym_id: str, source: str, kwargs: dict[str, Any], kinds: tuple[Kind, 
         article = "an" if what[0] in "aeiou" else "a"
         line = (f"{source}: subgoals[{i}] ({k.name}).args: {k.kind} needs {article} {what}, and {gym_id} has none "
                 f"in {PROBE_RESETS} seeded layouts (it has: {', '.join(sorted(seen)) or 'walls only'})")
-        named = what.split()[-1]
+        named = what.split(" (")[0].split()[-1]
         if named in types or (named == "object" and types):
             # the type is there, only its colour or lock differs: layouts drawn at random may still have it
             if line not in _WARNED:
