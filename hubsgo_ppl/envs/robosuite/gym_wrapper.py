@@ -17,7 +17,7 @@ from ...specs import SpecError
 from ..subgoals import Catalogue, load_catalogue
 from .base import SubgoalManipulationEnv
 from .collect_three_balls import CollectThreeBalls
-from .options import positive_options
+from .options import positive_options, scene_options
 from .push_any_one import PushAnyOne
 from .stack_cubes import StackCubes
 
@@ -111,6 +111,7 @@ def make_robosuite_task(catalogue: str | Path | Catalogue, **kwargs: Any) -> Rob
         raise SpecError(f"{cat.source}: family: {cat.family!r} is not a robosuite task; "
                         f"use hubsgo_ppl.envs.make() for it")
     positive_options(cat, cat.options)
+    scene_options(cat, cat.options)
     options = {**cat.options, **kwargs}
     env_class = options.pop("env_class", None)
     if env_class not in TASK_CLASSES:

@@ -9,7 +9,8 @@ from typing import Any, Callable
 
 from ...specs import SpecError
 
-__all__ = ["COLOURS", "DEFAULT_HORIZON", "POSITIVE", "colour_option", "listed_option", "positive_options"]
+__all__ = ["COLOURS", "DEFAULT_HORIZON", "POSITIVE", "colour_option", "listed_option", "positive_options",
+           "scene_options"]
 
 #: the cube colours a catalogue may name (``options.colours`` of PushAnyOne, ``options.cubes`` of StackCubes)
 COLOURS = {"red": (1, 0, 0, 1), "green": (0, 1, 0, 1), "blue": (0, 0, 1, 1), "yellow": (1, 1, 0, 1),
@@ -52,3 +53,49 @@ def positive_options(catalogue: Any, options: dict[str, Any]) -> None:
         if not number or not value > 0 or (whole and value != int(value)):
             raise SpecError(f"{getattr(catalogue, 'source', 'catalogue')}: options.{key}: {value!r} is not a "
                             f"positive {'whole ' if whole else ''}number of {unit}")
+
+
+def _noise_ok(value: Any) -> bool:
+    """robosuite's initial-joint noise: null (none), ``default``, or ``{magnitude: >= 0, type: gaussian|uniform}``."""
+    if value is None or value == "default":
+        return True
+    if not isinstance(value, dict) or set(value) != {"magnitude", "type"}:
+        return False
+    magnitude = value["magnitude"]
+    return (isinstance(magnitude, (int, float)) and not isinstance(magnitude, bool) and magnitude >= 0
+            and value["type"] in ("gaussian", "uniform"))
+
+
+def _table_ok(value: Any) -> bool:
+    """The table's full size: three positive numbers (length, width, thickness in metres)."""
+    return (isinstance(value, (list, tuple)) and len(value) == 3
+            and all(isinstance(v, (int, float)) and not isinstance(v, bool) and v > 0 for v in value))
+
+
+def _robot_ok(value: Any) -> bool:
+    from robosuite.robots import ROBOT_CLASS_MAPPING
+
+    return isinstance(value, str) and value in ROBOT_CLASS_MAPPING
+
+
+def _seed_ok(value: Any) -> bool:
+    return value is None or (isinstance(value, int) and not isinstance(value, bool) and value >= 0)
+
+
+#: the other scene options a catalogue may set -> (check, what a valid value is)
+SCENE_OPTIONS: dict[str, tuple[Callable[[Any], bool], str]] = {
+    "initialization_noise": (_noise_ok, "null, default or {magnitude: a number >= 0, type: gaussian or uniform}"),
+    "table_full_size": (_table_ok, "three positive numbers of metres (length, width, thickness)"),
+    "robots": (_robot_ok, "a robosuite robot name, e.g. Panda"),
+    "seed": (_seed_ok, "a whole number, 0 or more"),
+    "placement_initializer": (lambda value: value is None, "set from Python (a robosuite sampler), not in a catalogue"),
+}
+
+
+def scene_options(catalogue: Any, options: dict[str, Any]) -> None:
+    """Refuse, in one line naming the catalogue and the key, a scene option of :data:`SCENE_OPTIONS` whose
+    value robosuite would fail on deep inside the scene's construction."""
+    for key, (ok, what) in SCENE_OPTIONS.items():
+        if key in options and not ok(options[key]):
+            raise SpecError(f"{getattr(catalogue, 'source', 'catalogue')}: options.{key}: {options[key]!r} is not "
+                            f"{what}")

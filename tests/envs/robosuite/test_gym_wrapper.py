@@ -142,3 +142,21 @@ def test_tasks_and_check_env_refuse_the_same_arm_catalogues(tmp_path, catalogue,
     assert main([command[0], path, *command[1:]]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and fragment in err[0], err
+
+
+@pytest.mark.parametrize("key, value", [("initialization_noise", "lots"), ("initialization_noise", "{magnitude: 0.1}"),
+                                        ("table_full_size", "[1, 2]"), ("table_full_size", "big"),
+                                        ("robots", "Foo"), ("seed", "abc"), ("placement_initializer", "3")])
+def test_a_scene_option_robosuite_would_fail_on_is_one_line_naming_the_file_and_key(tmp_path, catalogue, capsys,
+                                                                                     key, value):
+    import yaml
+
+    from hubsgo_ppl.cli import main
+
+    data = yaml.safe_load(open(catalogue("push_any_one")).read())
+    data["options"][key] = yaml.safe_load(value)
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(data))
+    assert main(["tasks", str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"bad.yaml: options.{key}: " in err[0], err
