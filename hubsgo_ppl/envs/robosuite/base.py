@@ -403,6 +403,8 @@ class SubgoalManipulationEnv(ManipulationEnv):
         if choices is None:
             if not isinstance(value, (int, float)) or isinstance(value, bool):
                 raise SpecError(f"{where}: args.{key}: expected a number, got {value!r}")
+            if value < 0:   # a height below the object puts the target inside the table or the object
+                raise SpecError(f"{where}: args.{key}: {value!r} is below the object; give 0 or more metres")
             return float(value)
         if value not in choices:
             raise SpecError(f"{where}: args.{key}: {value!r} is not {'an' if typ[0] in 'aeiou' else 'a'} {typ} "

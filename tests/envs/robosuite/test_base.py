@@ -64,6 +64,15 @@ def test_bad_subgoals_name_the_problem(tmp_path, catalogue):
         make_robosuite_task(_bad_catalogue(tmp_path, source, "{name: x, kind: grasp, args: {}}"))
 
 
+def test_a_reach_above_height_below_the_object_is_refused(tmp_path, catalogue):
+    """A negative height puts the hover point under the cube, inside the table: it would never be reached."""
+    bad = "{name: x, kind: reach_above, args: {object: red, height: -0.1}}"
+    with pytest.raises(SpecError, match=r"subgoals\[0\] \(x\): args.height: -0.1 is below the object"):
+        make_robosuite_task(_bad_catalogue(tmp_path, catalogue("stack_cubes"), bad))
+    make_robosuite_task(_bad_catalogue(tmp_path, catalogue("stack_cubes"),
+                                       "{name: x, kind: reach_above, args: {object: red, height: 0.1}}")).close()
+
+
 def test_a_place_option_alone_picks_carries_and_releases(arm_env, achieved):
     """The scripted controller runs StackCubes as two place options, each from a cube on the table,
     and the grasps are achieved on the way (the dependency chain the critic's evidence sees)."""
