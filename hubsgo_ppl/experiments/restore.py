@@ -113,7 +113,8 @@ def check_resume(out: str | Path, task: str, *, agent: str | None = None, seed: 
         clash.append(f"--low-level {low_level} (the run's is {run.low_level})")
     ours = dict(run.model_spec or {})
     if model is not None and not other_task:
-        theirs = resolve_run(RunConfig(task=run.task_ref, agent="hubsgo", model=model, graph=graph)).model_spec
+        theirs = resolve_run(RunConfig(task=run.task_ref, agent="hubsgo", model=model, graph=graph,
+                                     steps=run.steps)).model_spec
         if dict(theirs or {}) != ours:
             clash.append(f"--model {model} (the run's spec is {run.model!r}; revise it with `hubsgo revise`)")
     elif graph is not None and not other_task and graph != ours.get("graph"):

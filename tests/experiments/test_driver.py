@@ -138,3 +138,22 @@ def test_a_zero_budget_is_refused_the_same_way_by_either_flag(tmp_path, capsys, 
     assert main(["train", "keydoor", "--out", str(out), "--no-progress", *flag]) == 2
     assert "steps takes an integer >= 1 (default 40000), got 0" in _one_line(capsys)   # one check, one line
     assert not out.exists()
+
+
+def test_resume_with_the_runs_own_model_prints_no_default_budget_note(tmp_path, capsys):
+    """A catalogue without a budget of its own: the --model check of --resume must not say the family's
+    default budget is used, when the run has its own --steps."""
+    from pathlib import Path
+
+    from hubsgo_ppl.experiments.resolve import resolve
+    from hubsgo_ppl.experiments.restore import check_resume
+
+    arms = Path(__file__).resolve().parents[2] / "examples" / "arms"
+    task, spec = str(arms / "push_four.yaml"), str(arms / "push_four-spec.yaml")
+    run = tmp_path / "run"
+    run.mkdir()
+    config = resolve(RunConfig(task=task, model=spec, steps=1500, low_level="learned"))
+    (run / "config.yaml").write_text(yaml.safe_dump(config))
+    capsys.readouterr()
+    check_resume(run, task, model=spec)
+    assert "no --steps" not in capsys.readouterr().err
