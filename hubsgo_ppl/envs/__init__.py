@@ -46,6 +46,14 @@ class TaskInfo:
     def catalogue(self) -> Catalogue:
         return load_catalogue(self.catalogue_path)
 
+    @property
+    def shipped(self) -> bool:
+        """Whether this is a built-in task's own catalogue (by name, or by the path of its file): only those
+        take the task's settings (``agents/presets.py``); a user's catalogue of the same name takes its
+        family's defaults, as every user catalogue does."""
+        own = tasks().get(self.name)
+        return own is not None and own.catalogue_path.resolve() == Path(self.catalogue_path).resolve()
+
 
 def _env_id(cat: Catalogue) -> str:
     camel = cat.title or "".join(p.capitalize() for p in cat.task.replace("-", "_").split("_"))

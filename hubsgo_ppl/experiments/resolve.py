@@ -110,7 +110,7 @@ def _episode_budget(info: Any, hyper: Mapping[str, Any]) -> tuple[int, int] | No
     no budget of its own: the family's episodes and the task's horizon (``--set env.horizon``, else the
     catalogue's, else the scene's default). None where the family's ``steps`` stand."""
     episodes = FAMILIES[info.family].episodes      # the family is known: resolve_hyper read its preset
-    if episodes is None or "steps" in TASK_PRESETS.get(info.name, {}):
+    if episodes is None or (info.shipped and "steps" in TASK_PRESETS.get(info.name, {})):
         return None
     from ..envs.robosuite.options import DEFAULT_HORIZON
 
@@ -138,12 +138,13 @@ def resolve_run(cfg: RunConfig) -> ResolvedRun:
     if cfg.steps is not None and budget_set:
         raise RunError(f"the budget is given twice, --steps {cfg.steps} and --set {budget_set[-1]}; give it once")
     try:        # the preset, the task's settings and --set merged and validated (agents/config.py)
-        hyper = resolve_hyper(info.family, info.name, cfg.agent, cfg.overrides, steps=cfg.steps,
+        preset_task = info.name if info.shipped else None      # a user's catalogue: the family's defaults
+        hyper = resolve_hyper(info.family, preset_task, cfg.agent, cfg.overrides, steps=cfg.steps,
                               low_level=cfg.low_level)
         episodes = _episode_budget(info, hyper) if cfg.steps is None and not budget_set else None
         if episodes is not None:
             count, horizon = episodes
-            hyper = resolve_hyper(info.family, info.name, cfg.agent, cfg.overrides, steps=count * horizon,
+            hyper = resolve_hyper(info.family, preset_task, cfg.agent, cfg.overrides, steps=count * horizon,
                                   low_level=cfg.low_level)
             print(f"hubsgo: note: no --steps: {count * horizon:,} env steps, the {info.family} family's {count} "
                   f"episodes of the task's {horizon}-step horizon", file=sys.stderr)

@@ -122,8 +122,8 @@ def check_resume(out: str | Path, task: str, *, agent: str | None = None, seed: 
     if overrides:
         info = get_task(run.task_ref)
         try:
-            hyper = resolve_hyper(info.family, info.name, run.agent, list(overrides), steps=run.steps,
-                                  low_level=run.low_level)
+            hyper = resolve_hyper(info.family, info.name if info.shipped else None, run.agent, list(overrides),
+                                  steps=run.steps, low_level=run.low_level)
         except ValueError as exc:
             raise RunError(str(exc)) from None
         for item in overrides:

@@ -88,3 +88,23 @@ def test_the_shipped_arm_tasks_take_the_learned_low_levels_measured_budgets():
     assert budget("stack_cubes", low_level="learned", steps=3_000) == 3_000
     assert budget("stack_cubes", low_level="learned", overrides=["steps=4000"]) == 4_000
     assert resolve_hyper("robosuite", "stack_cubes", "hdqn", low_level="learned")["steps"] == 25_000
+
+
+@pytest.mark.mujoco
+def test_a_users_catalogue_named_as_a_shipped_task_takes_the_familys_defaults_not_the_tasks(tmp_path):
+    """The task settings belong to the shipped catalogue (by name or by its file's path); a user's own
+    catalogue that reuses the name keeps its own horizon and trains for the family's episodes of it."""
+    from hubsgo_ppl.envs import get_task
+    from hubsgo_ppl.experiments.resolve import resolve
+    from hubsgo_ppl.experiments.resolved import RunConfig
+
+    own = tmp_path / "stack_cubes.yaml"
+    own.write_text("task: stack_cubes\nfamily: robosuite\noptions:\n  env_class: StackCubes\n  cubes: [blue]\n"
+                   "  horizon: 300\nsubgoals:\n  - {name: grasp_blue, kind: grasp, args: {object: blue}}\n")
+    hyper = resolve(RunConfig(task=str(own), agent="hdqn"))["hyper"]
+    assert hyper["steps"] == 30_000 and "horizon" not in hyper.get("env", {})
+    assert resolve(RunConfig(task=str(own), agent="hdqn", low_level="learned"))["hyper"]["steps"] == 30_000
+    shipped = get_task("stack_cubes")
+    assert shipped.shipped and not get_task(str(own)).shipped
+    by_path = resolve(RunConfig(task=str(shipped.catalogue_path)))["hyper"]
+    assert by_path["steps"] == 20_000 and by_path["env"] == {"horizon": 400}
