@@ -75,7 +75,8 @@ def _check_item(item: str, base: dict[str, Any], hyper: dict[str, Any], models: 
     if len(parts) == 1:
         name = parts[0]
         if name in sections:
-            first = next(iter(models[name].model_fields), "KEY") if name in models else "KEY"
+            keys = [k for k in models[name].model_fields if k not in DERIVED] if name in models else []
+            first = keys[0] if keys else "KEY"
             raise ConfigError(f"{name!r} is a section; set one of its keys, e.g. {name}.{first}=VALUE", None, name)
         if name not in plain:
             raise ConfigError(f"unknown setting {name!r}; settings: {', '.join(plain)}; sections: "

@@ -166,3 +166,14 @@ def test_resolve_merges_preset_task_and_overrides():
         resolve_hyper("minigrid", "keydoor", "dqn", ["dqn.gamma=2"])
     # sections the agent does not read are left as they are
     assert resolve_hyper("minigrid", "keydoor", "hdqn", ["hiro.whatever=1"])["hiro"]["whatever"] == 1
+
+
+@pytest.mark.parametrize("section", ["loop", "high", "low"])
+def test_a_section_set_whole_is_refused_with_an_example_key_that_can_be_set(section):
+    with pytest.raises(ConfigError) as err:
+        resolve_hyper("minigrid", "keydoor", "hubsgo", [f"{section}=3"])
+    example = re.search(r"e\.g\. (\S+)=VALUE", str(err.value)).group(1)
+    try:
+        resolve_hyper("minigrid", "keydoor", "hubsgo", [f"{example}=1"])
+    except ConfigError as exc:          # a value it refuses is fine; the key itself must be one it takes
+        assert "unknown key" not in str(exc), str(exc)
