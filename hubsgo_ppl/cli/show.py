@@ -35,6 +35,10 @@ def _never_updated(table: dict[str, Any]) -> str:
     update, which waits for the high level's transitions (``successes`` and ``critic_starts`` of
     ``subgoals.json``; a file written without them gets both reasons)."""
     successes, starts = table.get("successes"), table.get("critic_starts") or {}
+    source = table.get("critic_from")
+    if source:
+        return (f"the critic never updated in this run: these sets are those of the critic transferred from "
+                f"{source} (--init-from), not your edges alone; {_TRAIN_LONGER}")
     if successes == 0:
         return ("the critic never updated: no training episode succeeded, so it had no evidence, and these sets are "
                 f"its prior's (your edges alone); {_TRAIN_LONGER}")
