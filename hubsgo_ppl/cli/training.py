@@ -83,7 +83,7 @@ def cmd_revise(args: argparse.Namespace) -> int:
     if r.get("critic_learned", True):
         print(f"  carried over by name: {k['theta']} unary factors, {k['couplings']} couplings, {k['high_outputs']} "
               f"high-level outputs; new: {names(r['new']['subgoals'] + r['new']['edges'])}; the critic's optimiser "
-              f"restarts")
+              f"{'is carried over' if r.get('critic_optimizer') == 'carried over' else 'restarts'}")
     else:
         print(f"  the critic had not updated yet, so it starts as the revised spec says (every factor from its prior "
               f"and signs); carried over by name: {k['high_outputs']} high-level outputs")

@@ -228,3 +228,15 @@ def test_a_critic_that_never_updated_starts_the_revised_spec_afresh_so_a_re_sign
     assert couplings[frozenset(("yellow_door", "blue_door"))] == 2.0       # the new prior's strength x the new sign
     assert couplings[frozenset(("yellow_key", "blue_key"))] == -2.0
     assert torch.equal(after["theta"], torch.full((5,), -1.0))              # the new prior's field
+
+
+def test_the_revise_command_says_whether_the_critics_optimiser_restarts(paused, tmp_path, capsys):
+    same = _copy(paused, tmp_path, "same")
+    spec = paused.parent / "initial.yaml"
+    assert main(["revise", str(same), "--model", str(spec), "--no-train"]) == 0
+    out = capsys.readouterr().out
+    assert "optimiser is carried over" in out and "optimiser restarts" not in out
+    changed = _copy(paused, tmp_path, "changed")
+    dropped = _spec(tmp_path / "dropped.yaml", "dropped", FIVE, EDGES)
+    assert main(["revise", str(changed), "--model", str(dropped), "--no-train"]) == 0
+    assert "optimiser restarts" in capsys.readouterr().out
