@@ -109,6 +109,9 @@ def file_in_folder(source: str | Path, relative: str, key: str) -> Path:
 
 def load_catalogue(path: str | Path) -> Catalogue:
     """Load and validate a task catalogue YAML; errors name the file and key."""
+    if Path(path).is_dir():
+        raise SpecError(f"{path}: a directory, not a task catalogue file; pass the path of a catalogue's YAML file, "
+                        "or a built-in task name (`hubsgo tasks` lists them)")
     if not Path(path).is_file():
         where = "" if Path(path).is_absolute() else f" (relative to {Path.cwd()})"
         raise SpecError(f"{path}: no such task catalogue file{where}; check the path, or pass a built-in task "

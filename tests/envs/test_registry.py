@@ -101,6 +101,17 @@ def test_missing_user_catalogue():
         T.make("nowhere/maze.yaml")
 
 
+def test_a_directory_given_as_a_catalogue_or_a_layout_is_named_as_one(tmp_path):
+    (tmp_path / "maze.yaml").mkdir()
+    with pytest.raises(SpecError, match="maze.yaml: a directory, not a task catalogue file"):
+        T.make(tmp_path / "maze.yaml")
+    (tmp_path / "rooms.txt").mkdir()
+    (tmp_path / "rooms.yaml").write_text("task: rooms\nfamily: minigrid\noptions: {layout: rooms.txt}\n"
+                                         "subgoals:\n  - {name: goal, kind: goal}\n")
+    with pytest.raises(SpecError, match="rooms.txt' is a directory"):
+        T.make(tmp_path / "rooms.yaml")
+
+
 @pytest.mark.parametrize("task", sorted(BUILTIN))
 def test_critic_specs_match_the_catalogue(task):
     """models/<task>-{specific,fully_connected,independent}.yaml list the catalogue's sub-goals in

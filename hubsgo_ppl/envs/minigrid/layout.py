@@ -408,8 +408,8 @@ def _build(cat: Catalogue) -> MazeSpec:
         raise SpecError(format_validation_error(source, err)) from None
     path = cat.resolve(opts.layout)
     if not path.is_file():
-        raise _err(source, "options.layout", f"layout file {str(path)!r} not found; give a path "
-                   f"relative to the catalogue's folder")
+        raise _err(source, "options.layout", f"layout file {str(path)!r} " + ("is a directory" if path.is_dir()
+                   else "not found") + "; give the path of a layout file relative to the catalogue's folder")
     try:
         text = path.read_text(encoding="utf-8")
     except UnicodeDecodeError as exc:
