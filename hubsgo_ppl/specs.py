@@ -17,10 +17,10 @@ from pathlib import Path
 from typing import Any, ClassVar, TypeVar
 
 import yaml
-from pydantic import BaseModel, ConfigDict, ValidationError
+from pydantic import BaseModel, ConfigDict, ValidationError, field_validator
 
 from .errors import SpecError
-from .validation import KEY_CHARS, VALUE_CHARS, format_validation_error, shorten
+from .validation import KEY_CHARS, VALUE_CHARS, format_validation_error, no_bool_as_number, shorten
 
 __all__ = ["SpecError", "StrictModel", "load_yaml", "validate_spec", "format_validation_error"]
 
@@ -35,6 +35,8 @@ class StrictModel(BaseModel):
     model_config = ConfigDict(extra="forbid", validate_assignment=True, frozen=False)
     spec_kind: ClassVar[str] = "spec"
     spec_example: ClassVar[str] = ""
+
+    _no_bool_as_number = field_validator("*", mode="before")(classmethod(no_bool_as_number))
 
 
 class _UniqueKeyLoader(yaml.SafeLoader):

@@ -18,12 +18,14 @@ are listed, so that an error never prints a file back at length.
 
 from __future__ import annotations
 
+import typing
 from typing import Any
 
 from pydantic import BaseModel, ValidationError
 from pydantic_core import PydanticUndefined
 
-__all__ = ["format_validation_error", "shorten", "KEY_CHARS", "VALUE_CHARS", "PROBLEMS_SHOWN", "KEYS_SHOWN"]
+__all__ = ["format_validation_error", "no_bool_as_number", "shorten", "KEY_CHARS", "VALUE_CHARS", "PROBLEMS_SHOWN",
+           "KEYS_SHOWN"]
 
 #: the longest key, and value, an error message shows (longer ones are cut, with "...")
 KEY_CHARS, VALUE_CHARS = 40, 60
@@ -109,3 +111,29 @@ def format_validation_error(source: str, err: ValidationError, *, prefix: str = 
         more = len(problems) - limit
         lines.append(f"{source}: and {more} more problem{'s' * (more != 1)}")
     return sep.join(lines)
+
+
+def no_bool_as_number(cls: Any, value: Any, info: Any) -> Any:
+    """A pydantic ``field_validator("*", mode="before")``: YAML's true and false are no numbers, though
+    pydantic would read them as 1 and 0, so a field that takes numbers only refuses them."""
+    field = cls.model_fields.get(info.field_name or "")
+    if field is not None and _holds_bool(value) and _numbers_only(field.annotation):
+        raise ValueError("takes a number, not true or false")
+    return value
+
+
+def _holds_bool(value: Any) -> bool:
+    return isinstance(value, bool) or (isinstance(value, (list, tuple)) and any(isinstance(v, bool) for v in value))
+
+
+def _numbers_only(annotation: Any) -> bool:
+    """Whether a field's type takes numbers (int, float, or tuples and lists of them) and never a bool."""
+    leaves, todo = set(), [annotation]
+    while todo:
+        t = todo.pop()
+        args = typing.get_args(t)
+        if args and typing.get_origin(t) is not typing.Literal:
+            todo.extend(args)
+        elif isinstance(t, type) or t is Any:
+            leaves.add(t)
+    return bool(leaves & {int, float}) and not leaves & {bool, Any}

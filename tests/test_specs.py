@@ -279,3 +279,30 @@ def test_a_directory_given_as_the_spec_is_named_a_directory(tmp_path, capsys, gi
         assert main(argv) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "a directory, not a spec file" in err[0] and "no such" not in err[0], err
+
+
+@pytest.mark.parametrize("options, subgoal, key", [
+    ({"max_steps": True}, {"name": "g", "kind": "goal"}, "options.max_steps"),
+    ({}, {"name": "c", "kind": "at", "args": {"cell": [True, 1]}}, "args.cell"),
+])
+def test_true_or_false_is_no_number_in_a_catalogue(tmp_path, options, subgoal, key):
+    from hubsgo_ppl.envs import make
+
+    (tmp_path / "m.txt").write_text("#####\n#A.G#\n#####\n")
+    (tmp_path / "m.yaml").write_text(yaml.safe_dump({
+        "task": "m", "family": "minigrid", "options": {"layout": "m.txt", **options},
+        "subgoals": [subgoal, {"name": "goal", "kind": "goal"}]}))
+    with pytest.raises(SpecError, match=rf"{key}: takes a number, not true or false"):
+        make(tmp_path / "m.yaml")
+
+
+def test_true_or_false_is_no_number_in_a_critic_spec(tmp_path):
+    spec = {"name": "b", "subgoals": ["a", "goal"], "edges": [["a", "goal", "positive"]],
+            "inference": {"burn_in": False, "num_samples": 64, "jit": True}}
+    path = tmp_path / "b.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    with pytest.raises(SpecError, match="inference.burn_in: takes a number, not true or false"):
+        load_model_spec(str(path))
+    spec["inference"]["burn_in"] = 0            # a bool where the setting is one stays accepted
+    path.write_text(yaml.safe_dump(spec))
+    assert load_model_spec(str(path)).inference.jit is True

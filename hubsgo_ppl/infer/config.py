@@ -16,9 +16,9 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from ..validation import format_validation_error
+from ..validation import format_validation_error, no_bool_as_number
 
 __all__ = ["InferenceSpec", "InferenceConfig", "MAX_EXACT_N"]
 
@@ -29,6 +29,7 @@ class InferenceSpec(BaseModel):
     """Settings of the critic's inference (paper defaults: burn-in 32, 64 samples per update)."""
 
     model_config = ConfigDict(extra="forbid", validate_assignment=True)
+    _no_bool_as_number = field_validator("*", mode="before")(classmethod(no_bool_as_number))
 
     lr: float = Field(0.05, gt=0, le=10.0, allow_inf_nan=False, description="Adam step size for theta and J")
     burn_in: int = Field(32, ge=0, le=1_000_000, description="MH sweeps per update, from the chains' last state")
