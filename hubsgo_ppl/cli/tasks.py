@@ -53,6 +53,11 @@ def _check_task(name: str, info: Any, model: str | None) -> None:
             shortest = (f"{low} steps" if low == high else
                         f"{low}-{high} steps, by the start direction (drawn at random each episode)")
             print(f"    reachability: the goal and every sub-goal can be reached; shortest solution {shortest}")
+            from ..experiments.driver import max_steps_below_solution
+
+            short = max_steps_below_solution(name)
+            if short:
+                print(f"    reachability: WARNING: {short}")
     from ..specs import list_model_specs
 
     if model is None and f"{info.name}-specific" not in list_model_specs():

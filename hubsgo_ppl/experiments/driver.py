@@ -227,6 +227,21 @@ def _resume(cfg: RunConfig, out: Path, stop_at: int | None = None):
     return run, env, agent, float(ckpt.get("wall_time", 0.0)), agent.env_steps + 1
 
 
+def max_steps_below_solution(task_ref: str, max_steps: Any = None) -> str | None:
+    """What to say where a maze's ``max_steps`` (``max_steps``: a ``--set env.max_steps``, else the
+    catalogue's) truncates every episode before the shortest solution reaches the goal; None otherwise."""
+    from ..envs import get_task
+    from ..envs.minigrid.bfs import optimal_steps_range
+    from ..envs.minigrid.layout import load_maze_spec
+
+    limit = int(max_steps or load_maze_spec(get_task(task_ref).catalogue).max_steps)
+    low, _ = optimal_steps_range(task_ref)
+    if limit >= low:
+        return None
+    return (f"max_steps {limit} is below the shortest solution ({low} steps), so no episode can reach the goal; "
+            f"raise options.max_steps (or --set env.max_steps) to {low} or more")
+
+
 def _new(run: ResolvedRun, out: Path, cfg: RunConfig | None, started: bool, resumed: bool):
     """A run started afresh (``cfg``: the user's request, for --init-from and --set; None on a resume)."""
     from ..envs.minigrid.registered import is_registered
@@ -242,6 +257,10 @@ def _new(run: ResolvedRun, out: Path, cfg: RunConfig | None, started: bool, resu
         elif never:
             print(f"hubsgo: warning: {cfg.task}: no state the agent can reach achieves {', '.join(never)}; "
                   "check the layout (a key behind its own door, a walled-in cell, a cell on lava)", file=sys.stderr)
+        if never is not None:
+            short = max_steps_below_solution(run.task_ref, (run.hyper.get("env") or {}).get("max_steps"))
+            if short:
+                print(f"hubsgo: warning: {cfg.task}: {short}", file=sys.stderr)
     if not resumed:
         note_unlinked_goals(run)
     plan = schedules = None
