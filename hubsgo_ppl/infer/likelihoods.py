@@ -40,13 +40,13 @@ def get_likelihood(name: str, **params) -> "Likelihood":
     return build(LIKELIHOODS, "likelihood", name, **params)
 
 
-def _positive(kind: str, key: str, value: float) -> float:
+def _positive(kind: str, key: str, value: float, example: float = 1.0) -> float:
     try:
         value = float(value)
     except (TypeError, ValueError):
         raise ValueError(f"{kind} likelihood: {key} must be a number, got {value!r}") from None
     if not math.isfinite(value) or value <= 0:
-        raise ValueError(f"{kind} likelihood: {key} must be > 0, got {value!r}; e.g. {key}: 1.0")
+        raise ValueError(f"{kind} likelihood: {key} must be > 0, got {value!r}; e.g. {key}: {example}")
     return value
 
 
@@ -161,7 +161,7 @@ class OutcomeLikelihood(Likelihood):
     evidence = "outcomes"
 
     def __init__(self, flip: float = 0.02, power: float = 0.25, settled_power: float = 0.4):
-        flip = _positive("outcome", "flip", flip)
+        flip = _positive("outcome", "flip", flip, example=0.02)
         if not flip < 0.5:
             raise ValueError(f"outcome likelihood: flip must be < 0.5, got {flip!r}; e.g. flip: 0.02")
         self.flip = flip

@@ -93,3 +93,10 @@ def test_td_likelihood_log_likelihood_sums_the_residual_densities():
     lik = get_likelihood("gaussian", scale=0.5)
     expected = lik.distribution(batch.residuals(w)).log_prob(torch.zeros(())).sum(-1)
     assert torch.allclose(lik.log_likelihood(w, *batch.tensors()), expected)
+
+
+def test_a_bad_flip_is_refused_with_an_example_the_outcome_likelihood_takes():
+    with pytest.raises(ValueError, match=r"flip must be > 0, got -0.1; e.g. flip: (\S+)") as err:
+        get_likelihood("outcome", flip=-0.1)
+    example = float(str(err.value).rsplit("flip: ", 1)[1])
+    assert get_likelihood("outcome", flip=example).flip == example
