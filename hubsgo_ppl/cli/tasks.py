@@ -98,7 +98,7 @@ def cmd_check_env(args: argparse.Namespace) -> int:
         notes = env_notes(env) if not problems else []
     finally:
         env.close()
-    if route:
+    if route:       # a bare Gymnasium id: the catalogue that trains it
         notes.append(route)
     for problem in problems:
         print(f"missing: {problem}")
@@ -138,14 +138,24 @@ def _gym_env(env_id: str, unknown: Exception) -> Any:
     return gym.make(env_id)
 
 
-def _catalogue_route(env: Any) -> str | None:
-    """How to train a MiniGrid environment given by its Gymnasium id: a catalogue that names it."""
+def _catalogue_route(env: Any) -> str:
+    """How to train an environment given by its Gymnasium id: a catalogue that names it and lists its
+    sub-goals (MiniGrid's family for a MiniGrid env, the gym family for any other with discrete actions)."""
+    import gymnasium as gym
+
     try:
         from minigrid.minigrid_env import MiniGridEnv
     except ImportError:
-        return None
-    if not isinstance(env.unwrapped, MiniGridEnv):
-        return None
-    return ("a MiniGrid environment: to train on it, write a catalogue with family: minigrid and "
-            "options.gym_id naming it, and list its sub-goals (docs/minigrid.md); `hubsgo check-env` that "
-            "catalogue checks it with the sub-goals")
+        MiniGridEnv = ()
+    if isinstance(env.unwrapped, MiniGridEnv):
+        return ("a MiniGrid environment: to train on it, write a catalogue with family: minigrid and "
+                "options.gym_id naming it, and list its sub-goals (docs/minigrid.md); `hubsgo check-env` that "
+                "catalogue checks it with the sub-goals")
+    if not isinstance(env.action_space, gym.spaces.Discrete):
+        return (f"its actions are {type(env.action_space).__name__}, and a Gymnasium environment of your own trains "
+                "on Discrete actions only (docs/own_env.md); the arm tasks' continuous control is the robosuite "
+                "family's (docs/arms.md)")
+    return ("to train on it as it is, write a catalogue with family: gym and options.gym_id naming it, its "
+            "sub-goals given as predicates (docs/own_env.md, \"The catalogue, without Python\"): that family "
+            "flattens the observation and reports the sub-goals itself, so nothing listed above needs writing; "
+            "`hubsgo check-env` that catalogue checks it with the sub-goals")

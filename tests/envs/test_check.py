@@ -94,7 +94,12 @@ def test_the_cli_passes_a_task_fails_a_plain_env_and_refuses_an_unknown_one(caps
     assert "meets the sub-goal contract" in capsys.readouterr().out
     assert main(["check-env", "CartPole-v1", "--steps", "5"]) == 1
     out = capsys.readouterr().out.strip().splitlines()
-    assert len(out) == 5 and all(line.startswith("missing: ") for line in out)
+    assert len(out) == 6 and all(line.startswith("missing: ") for line in out[:5])
+    # a plain id is pointed at the catalogue that trains it as it is, not at writing the contract by hand
+    assert out[5].startswith("note: to train on it as it is, write a catalogue with family: gym")
+    assert main(["check-env", "Pendulum-v1", "--steps", "5"]) == 1
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    assert last.startswith("note: its actions are Box") and "Discrete actions only" in last
     assert main(["check-env", "no_such_env"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "unknown task 'no_such_env'" in err[0]
