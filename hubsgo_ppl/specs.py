@@ -126,6 +126,13 @@ class ComponentSpec(BaseModel):
     model_config = _ConfigDict(extra="allow")
     name: str = Field(description="registered name, e.g. 'bernoulli' or 'gaussian'")
 
+    @model_validator(mode="before")
+    @classmethod
+    def _a_mapping(cls, value: Any) -> Any:
+        if isinstance(value, str):      # `prior: ising`: the name alone, where a mapping is due
+            raise ValueError(f"write {{name: {value}}}, with any parameters beside the name")
+        return value
+
     def params(self) -> dict[str, Any]:
         return dict(self.model_extra or {})
 

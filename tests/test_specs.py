@@ -306,3 +306,13 @@ def test_true_or_false_is_no_number_in_a_critic_spec(tmp_path):
     spec["inference"]["burn_in"] = 0            # a bool where the setting is one stays accepted
     path.write_text(yaml.safe_dump(spec))
     assert load_model_spec(str(path)).inference.jit is True
+
+
+@pytest.mark.parametrize("key, name", [("prior", "ising"), ("likelihood", "gaussian")])
+def test_a_prior_or_likelihood_given_by_its_name_alone_is_shown_the_mapping_it_needs(tmp_path, key, name):
+    path = tmp_path / "n.yaml"
+    path.write_text(yaml.safe_dump({"name": "n", "subgoals": ["a", "goal"], "edges": [["a", "goal", "positive"]],
+                                    key: name}))
+    with pytest.raises(SpecError, match=rf"n.yaml: {key}: write {{name: {name}}}, with any parameters") as err:
+        load_model_spec(str(path))
+    assert "ComponentSpec" not in str(err.value) and "\n" not in str(err.value)
