@@ -123,13 +123,15 @@ def apply_overrides(cfg: dict[str, Any], overrides: list[str]) -> dict[str, Any]
     cfg = copy.deepcopy(cfg)
     for item in overrides:
         if "=" not in item:
-            raise ValueError(f"--set {item!r}: expected KEY=VALUE, e.g. loop.option_steps=30")
+            raise ValueError(f"--set {item}: expected KEY=VALUE, e.g. loop.option_steps=30")
         key, value = item.split("=", 1)
         parts = key.strip().split(".")
-        node = cfg
+        node, where = cfg, ""
         for p in parts[:-1]:
             if p not in node or not isinstance(node[p], dict):
-                raise ValueError(f"--set {item!r}: unknown section {p!r}; sections: {sorted(k for k, v in cfg.items() if isinstance(v, dict))}")
-            node = node[p]
+                sections = ", ".join(sorted(k for k, v in node.items() if isinstance(v, dict))) or "none"
+                of = f" of {where[:-1]}" if where else ""
+                raise ValueError(f"--set {item}: unknown section {where + p!r}; sections{of}: {sections}")
+            node, where = node[p], where + p + "."
         node[parts[-1]] = _coerce(value)
     return cfg

@@ -35,7 +35,10 @@ def test_overrides_parse_yaml_values_at_any_depth_and_leave_the_input_alone():
 
 @pytest.mark.parametrize("item, message", [("loop.option_steps", "expected KEY=VALUE"),
                                            ("nope.x=1", "unknown section 'nope'"),
-                                           ("steps.x=1", "unknown section 'steps'")])
+                                           ("steps.x=1", "unknown section 'steps'"),
+                                           ("critic.lr=0.1",
+                                            "^--set critic.lr=0.1: unknown section 'critic'; sections: dqn, env, high"),
+                                           ("high.foo.x=1", "unknown section 'high.foo'; sections of high: none$")])
 def test_bad_overrides_name_the_problem(item, message):
     with pytest.raises(ValueError, match=message):
         apply_overrides(preset("minigrid"), [item])
