@@ -128,12 +128,24 @@ def check_env(env: gym.Env, steps: int = 50, seed: int = 0) -> list[Problem]:
     return problems
 
 
+def _has_potential(task: Any) -> bool:
+    """Whether the env gives a ``subgoal_potential()``: a wrapper that has the method but answers None
+    (an own env's wrapper, where the env has none) gives none."""
+    potential = getattr(task, "subgoal_potential", None)
+    if not callable(potential):
+        return False
+    try:
+        return potential() is not None
+    except Exception:       # noqa: BLE001 - it exists; what it needs (a reset) is the shaping's business
+        return True
+
+
 def env_notes(env: gym.Env) -> list[str]:
     """Optional parts of the contract the env lacks, and which low level misses them."""
     task = env.unwrapped
     notes = []
     grid = isinstance(env.action_space, gym.spaces.Discrete)    # the arms' learned low level reaches targets
-    if grid and not callable(getattr(task, "subgoal_potential", None)):
+    if grid and not _has_potential(task):
         notes.append("no subgoal_potential(): the learned grid low level trains without shaping "
                      "(--set low.shaping=0)")
     unreported = getattr(task, "unreported_info_keys", None)

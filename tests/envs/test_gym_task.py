@@ -173,6 +173,8 @@ def test_check_env_notes_an_info_key_the_env_never_reports(tmp_path, capsys):
     notes = [line for line in out.splitlines() if "never held" in line]
     assert len(notes) == 1 and notes[0].startswith("note: sub-goal 'gems' reads info['has_gemz']"), out
     assert "meets the sub-goal contract" in out
+    # FrozenLake has no subgoal_potential(), though the family's wrapper has the method (it answers None)
+    assert "note: no subgoal_potential(): the learned grid low level trains without shaping" in out
 
 
 @pytest.mark.parametrize("space, flattened", [(gym.spaces.Text(6), True),
