@@ -188,6 +188,37 @@ def _numbers_in_range(kind: str, v: ComponentSpec) -> ComponentSpec:
     return v
 
 
+def own_component(kind: str, name: str) -> None:
+    """Register the prior or likelihood class a spec names as ``module:Class`` (a user's own, importable
+    from an installed package or ``PYTHONPATH``) under that name, so the critic builds it as it builds
+    the registered ones; a name without ``:`` is left to the registry."""
+    import importlib
+
+    from .infer import likelihoods, priors
+
+    table, base = (priors.PRIORS, priors.Prior) if kind == "prior" else (likelihoods.LIKELIHOODS, likelihoods.Likelihood)
+    module, sep, qualname = name.partition(":")
+    if not sep or name in table:
+        return
+    if not module or not qualname:
+        raise ValueError(f"{kind} {name!r}: name a class of your own as 'module:Class', e.g. 'my_pkg.priors:Sparse'")
+    try:
+        obj = importlib.import_module(module)
+        for part in qualname.split("."):
+            obj = getattr(obj, part)
+    except ModuleNotFoundError as exc:
+        raise ValueError(f"{kind} {name!r}: cannot import {module!r} ({exc}); install its package or add its "
+                         "folder to PYTHONPATH") from None
+    except AttributeError:
+        raise ValueError(f"{kind} {name!r}: module {module!r} has no {qualname!r}; check the name") from None
+    if not (isinstance(obj, type) and issubclass(obj, base)):
+        what = "a class" if isinstance(obj, type) else f"a {type(obj).__name__}"
+        raise ValueError(f"{kind} {name!r} is {what}, not a subclass of hubsgo_ppl.infer.{base.__name__}")
+    table[name] = obj
+    if "registered_name" not in vars(obj):      # not also registered under a short name of its own
+        obj.registered_name = name
+
+
 class ModelSpec(StrictModel):
     """A critic spec; see models/example-specific.yaml.
 
@@ -229,6 +260,7 @@ class ModelSpec(StrictModel):
     def _prior_ok(cls, v: ComponentSpec) -> ComponentSpec:
         from .infer.priors import PRIORS
 
+        own_component("prior", v.name)
         if v.name not in PRIORS:
             name = shorten(repr(v.name), KEY_CHARS)
             raise ValueError(f"unknown prior {name}; registered: {', '.join(sorted(PRIORS))}")
@@ -239,6 +271,7 @@ class ModelSpec(StrictModel):
     def _likelihood_ok(cls, v: ComponentSpec) -> ComponentSpec:
         from .infer.likelihoods import get_likelihood
 
+        own_component("likelihood", v.name)
         _numbers_in_range("likelihood", v)
         try:
             get_likelihood(v.name, **v.params())  # ValueError names the bad key, or lists registered names

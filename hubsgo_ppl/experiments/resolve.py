@@ -219,7 +219,7 @@ def resolve_run(cfg: RunConfig) -> ResolvedRun:
 
 def _source_spec(run_dir: str | Path) -> Any:
     """The critic spec a run was trained with, or None where it has none."""
-    from ..specs import ModelSpec
+    from ..specs import ModelSpec, validate_spec
 
     from .checkpoint import run_config
 
@@ -227,7 +227,9 @@ def _source_spec(run_dir: str | Path) -> Any:
         spec = run_config(run_dir).get("model_spec")
     except (RunError, CheckpointError) as exc:     # no run there, or a damaged one: that, not a missing spec
         raise RunError(f"--init-from {run_dir}: {str(exc).removeprefix(f'{run_dir}: ')}") from None
-    return ModelSpec.model_validate(spec) if isinstance(spec, dict) else None
+    if not isinstance(spec, dict):
+        return None
+    return validate_spec(ModelSpec, spec, source=f"--init-from {run_dir}: its critic spec")
 
 
 def task_goals(task_ref: str) -> list[str]:

@@ -21,9 +21,10 @@ __all__ = ["build_run", "restore", "load_run", "check_resume"]
 
 def _critic(run: ResolvedRun) -> Any:
     from ..infer.critic import SubgoalCritic
-    from ..specs import ModelSpec
+    from ..specs import ModelSpec, validate_spec
 
-    spec = ModelSpec.model_validate(dict(run.model_spec))
+    # a spec naming a prior or likelihood of the user's own imports it again here: one line if it cannot
+    spec = validate_spec(ModelSpec, dict(run.model_spec), source=f"the run's critic spec {run.model!r}")
     return SubgoalCritic.from_spec(spec, seed=stream_seed(run.seed, CRITIC_STREAM))
 
 
