@@ -101,6 +101,9 @@ class TDBatch:
                              f"got {tuple(self.available.shape)}")
         if self.outcomes is not None and (self.outcomes.dim() != 2 or self.outcomes.shape[1] != self.q_next.shape[1]):
             raise ValueError(f"TDBatch.outcomes must have shape (E, {self.q_next.shape[1]}), got {tuple(self.outcomes.shape)}")
+        if self.outcomes is not None and not bool(((self.outcomes == 0) | (self.outcomes == 1)).all()):
+            raise ValueError("TDBatch.outcomes must hold 0 or 1 (a sub-goal achieved or not in a successful "
+                             "episode), and it holds other values (NaN, inf or fractions); pass the achieved sets")
         for f in fields(self):
             if f.name in _NOT_TD:
                 continue

@@ -56,6 +56,8 @@ def test_construction_converts_detaches_and_validates():
            (dict(reward=torch.zeros(3)), r"reward must have shape \(2,\)"),
            (dict(available=torch.ones(2, 2, dtype=torch.bool)), "available must have q_next's shape"),
            (dict(outcomes=torch.ones(1, 2)), r"outcomes must have shape \(E, 3\)"),
+           (dict(outcomes=torch.tensor([[1.0, math.nan, 0.0]])), "outcomes must hold 0 or 1"),
+           (dict(outcomes=torch.tensor([[1.0, 0.5, math.inf]])), "outcomes must hold 0 or 1"),
            (dict(weight=0.0), "weight must be a positive number"),
            (dict(reward=torch.tensor([0.0, math.nan])), "reward has NaN or inf")]
     base = dict(q_taken=torch.zeros(2), q_next=torch.zeros(2, 3), reward=torch.zeros(2), discount=torch.ones(2))
