@@ -252,6 +252,27 @@ class SubgoalCritic(CriticReadout):
         validate = self.config.pyro_validation == "always" or (
             self.config.pyro_validation == "first" and self.num_updates == 0)
         draws = self._draw()
+        params = self._param_state["params"]
+        # the step updates the baseline in place; a step that fails puts back this copy
+        baseline = {k: v.detach().clone() for k, v in params.items() if k.startswith("__baseline")}
+        try:
+            loss = self._elbo_step(draws, evidence, weight, residual_fn, validate)
+        except Exception:
+            self._restore_baseline(baseline)
+            raise
+        self._chains = self._last_samples = draws
+        return loss
+
+    def _restore_baseline(self, baseline: dict) -> None:
+        """Put back the decaying-average baseline of before a step that failed: a non-finite cost folded
+        into it would make every later update's gradient non-finite."""
+        params, cons = self._param_state["params"], self._param_state["constraints"]
+        for k in [k for k in params if k.startswith("__baseline") and k not in baseline]:
+            del params[k]
+            cons.pop(k, None)
+        params.update(baseline)
+
+    def _elbo_step(self, draws, evidence, weight, residual_fn, validate) -> float:
         if self._compiled_elbo is not None and residual_fn is None and not validate:
             loss = self._compiled_elbo.step(self._param_state, draws, *evidence, weight=weight)
             self._step_stats = self._compiled_elbo.extra_values
@@ -261,7 +282,6 @@ class SubgoalCritic(CriticReadout):
                                                  residual_fn=residual_fn)
             with torch.no_grad():
                 self._step_stats = tuple(x.detach() for x in self._site_stats())
-        self._chains = self._last_samples = draws
         if not math.isfinite(loss):
             raise FloatingPointError(
                 f"critic loss is {loss}: the likelihood of some sampled set is non-finite; "
