@@ -12,7 +12,7 @@ from typing import Any, Mapping
 import torch
 
 from .. import __version__
-from ..agents.config import ConfigError, resolve_hyper
+from ..agents.config import AGENTS, ConfigError, resolve_hyper
 from ..agents.presets import FAMILIES, TASK_PRESETS
 from ..envs import get_task
 from ..envs.subset import catalogue_order, check_subset
@@ -134,6 +134,8 @@ def resolve_run(cfg: RunConfig) -> ResolvedRun:
             raise RunError(f"{name} must be a positive whole number, got {value!r}")
     if isinstance(cfg.seed, bool) or not isinstance(cfg.seed, int) or cfg.seed < 0:
         raise RunError(f"a seed is a whole number, 0 or more; got {cfg.seed!r}")
+    if cfg.agent not in AGENTS:
+        raise RunError(f"unknown agent {cfg.agent!r}; use one of: {', '.join(AGENTS)}")
     budget_set = [o for o in cfg.overrides if o.split("=", 1)[0].strip() == "steps"]
     if cfg.steps is not None and budget_set:
         raise RunError(f"the budget is given twice, --steps {cfg.steps} and --set {budget_set[-1]}; give it once")
