@@ -8,6 +8,7 @@ live with the distribution that samples with them; they are re-exported here, wh
 from __future__ import annotations
 
 import hashlib
+import os
 
 import torch
 from pyro.infer.mcmc.mcmc_kernel import MCMCKernel
@@ -36,9 +37,10 @@ class MRFMHKernel(MCMCKernel):
     The single site ``site`` holds w in {0,1}^N. There is no constrained-space transform
     (``transforms = {}``). Each :meth:`sample` call runs ``steps_per_sample`` sweeps.
 
-    Randomness: each chain's generator is seeded from ``seed``, the setup count (sequential chains
-    in one process) and ``torch.initial_seed()``, which :class:`pyro.infer.MCMC` sets per chain in
-    its worker processes. Nothing is drawn from the global RNG. The kernel pickles without its
+    Randomness: each chain's generator is seeded from ``seed`` and the setup count (sequential chains
+    in one process), so the same ``seed`` gives the same draws in every process; in the worker
+    processes of ``num_chains > 1``, also from ``torch.initial_seed()``, which :class:`pyro.infer.MCMC`
+    sets per chain there. Nothing is drawn from the global RNG. The kernel pickles without its
     generator, so ``num_chains > 1`` works with multiprocessing.
 
     >>> import torch, pyro
@@ -77,6 +79,7 @@ class MRFMHKernel(MCMCKernel):
         self.transforms = {}
         self._initial = None
         self._setups = 0
+        self._pid = os.getpid()     # the process that built it draws from ``seed`` alone
         self._generator = None
         self._accepted = 0
         self._flips = 0
@@ -87,7 +90,10 @@ class MRFMHKernel(MCMCKernel):
         return state
 
     def setup(self, warmup_steps, *args, **kwargs):
-        key = f"{self.seed}:{self._setups}:{torch.initial_seed()}".encode()
+        # torch's initial seed differs from process to process unless the user sets it: only a worker's,
+        # which pyro.infer.MCMC sets per chain, tells the chains of one run apart
+        stream = 0 if os.getpid() == self._pid else torch.initial_seed()
+        key = f"{self.seed}:{self._setups}:{stream}".encode()
         self._setups += 1
         self._generator = torch.Generator().manual_seed(int.from_bytes(hashlib.sha256(key).digest()[:7], "little"))
         self._accepted = self._flips = 0

@@ -155,6 +155,19 @@ def test_pyro_mcmc_route_matches_exact_distribution_larger(n, kernel):
     assert tv(w, *params)[0] <= TV_TOL
 
 
+def test_mcmc_kernel_seed_alone_fixes_the_draws_whatever_torch_was_seeded_with():
+    seed, state = torch.initial_seed(), torch.get_rng_state()
+    try:
+        draws = []
+        for global_seed in (1, 2):      # a fresh process starts torch at a random initial seed
+            torch.manual_seed(global_seed)
+            draws.append(_mcmc_samples(3, "single_site", 200, seed=0)[1])
+    finally:
+        torch.manual_seed(seed)
+        torch.set_rng_state(state)
+    assert torch.equal(draws[0], draws[1])
+
+
 def test_mcmc_kernel_several_chains_pickles_and_differs():
     theta, coupling, ei = random_mrf(4, seed=3)
     k = MRFMHKernel(theta, coupling, ei, seed=5)
