@@ -54,9 +54,11 @@ def train(cfg: RunConfig, out: str | Path, resume: bool = False, progress: bool 
     bad = [type(cb).__name__ for cb in user if not isinstance(cb, Callback)]
     if bad:
         raise RunError(f"callbacks must be Callback objects (hubsgo_ppl.experiments.Callback); got {', '.join(bad)}")
+    if isinstance(cfg.threads, bool) or not isinstance(cfg.threads, int) or cfg.threads <= 0:
+        raise RunError(f"threads must be a positive whole number, got {cfg.threads!r}")
     where = {"phase": "start", "task": str(cfg.task)}
     try:
-        torch.set_num_threads(int(cfg.threads))     # before anything is built, as in a sweep worker
+        torch.set_num_threads(cfg.threads)     # before anything is built, as in a sweep worker
         with run_folder_lock(out):
             return _train(cfg, out, resume, default_callbacks(stop_at, max_episodes, progress, on_episode) + user,
                           where, stop_at)

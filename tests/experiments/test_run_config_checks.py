@@ -9,3 +9,10 @@ from hubsgo_ppl.experiments.resolve import resolve_run
 def test_an_unknown_agent_is_refused_before_anything_is_built():
     with pytest.raises(RunError, match="unknown agent 'hubsg'; use one of: .*hubsgo"):
         resolve_run(RunConfig(task="keydoor", agent="hubsg", steps=100))
+
+
+@pytest.mark.parametrize("threads", [0, -1, "x", 1.5])
+def test_threads_are_checked_before_torch_reads_them(tmp_path, threads):
+    with pytest.raises(RunError, match="threads must be a positive whole number"):
+        train(RunConfig(task="keydoor", steps=100, threads=threads), tmp_path / "run", progress=False)
+    assert not (tmp_path / "run").exists()
