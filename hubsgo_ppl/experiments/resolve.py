@@ -136,6 +136,9 @@ def resolve_run(cfg: RunConfig) -> ResolvedRun:
         raise RunError(f"a seed is a whole number, 0 or more; got {cfg.seed!r}")
     if cfg.agent not in AGENTS:
         raise RunError(f"unknown agent {cfg.agent!r}; use one of: {', '.join(AGENTS)}")
+    if (cfg.transfer is not None or cfg.restart_schedules) and cfg.init_from is None:
+        what = "transfer names what to take" if cfg.transfer is not None else "restart_schedules is about what is taken"
+        raise RunError(f"{what} from the run given by init_from; give init_from=RUN (--init-from RUN)")
     budget_set = [o for o in cfg.overrides if o.split("=", 1)[0].strip() == "steps"]
     if cfg.steps is not None and budget_set:
         raise RunError(f"the budget is given twice, --steps {cfg.steps} and --set {budget_set[-1]}; give it once")

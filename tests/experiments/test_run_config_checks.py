@@ -16,3 +16,10 @@ def test_threads_are_checked_before_torch_reads_them(tmp_path, threads):
     with pytest.raises(RunError, match="threads must be a positive whole number"):
         train(RunConfig(task="keydoor", steps=100, threads=threads), tmp_path / "run", progress=False)
     assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("change, what", [(dict(transfer=["critic"]), "transfer"),
+                                          (dict(restart_schedules=True), "restart_schedules")])
+def test_transfer_settings_without_a_source_run_are_refused(change, what):
+    with pytest.raises(RunError, match=f"{what} .* from the run given by init_from"):
+        resolve_run(RunConfig(task="keydoor", steps=100, **change))
