@@ -304,6 +304,11 @@ class ModelSpec(StrictModel):
         except (TypeError, ValueError) as exc:     # a parameter of the wrong type (text or a list for a number)
             params = shorten(str(self.prior.params()), VALUE_CHARS)
             raise ValueError(f"prior {self.prior.name!r} {params}: {exc}; give each parameter a number") from None
+        from .infer.likelihoods import check_likelihood, get_likelihood
+        from .infer.priors import check_prior
+
+        check_prior(prior)                                  # a user's own: its distribution() can serve the critic
+        check_likelihood(get_likelihood(self.likelihood.name, **self.likelihood.params()), len(self.subgoals))
         holds_prior = prior.natural_params() is not None    # a pairwise MRF the guide can start equal to
         if "init" not in self.inference.model_fields_set:    # left out: start at the prior where the guide can
             self.inference.init = "prior" if holds_prior else "edges"

@@ -28,7 +28,7 @@ import torch
 
 from ._registry import build, make_register
 
-__all__ = ["Likelihood", "LIKELIHOODS", "register_likelihood", "get_likelihood"]
+__all__ = ["Likelihood", "LIKELIHOODS", "register_likelihood", "get_likelihood", "check_likelihood"]
 
 LIKELIHOODS: dict[str, type] = {}
 register_likelihood = make_register(LIKELIHOODS, "likelihood", "log_likelihood")
@@ -38,6 +38,41 @@ EVIDENCE = ("td", "outcomes")
 def get_likelihood(name: str, **params) -> "Likelihood":
     """Instantiate the likelihood registered as ``name`` (unknown names list the registered ones)."""
     return build(LIKELIHOODS, "likelihood", name, **params)
+
+
+def check_likelihood(likelihood: "Likelihood", n: int) -> None:
+    """A ``ValueError`` in one line where ``likelihood`` cannot score the critic's evidence for N = ``n``
+    sub-goals: a TD likelihood's ``distribution(loc)`` must exist, have ``loc``'s shape as its batch shape
+    and no event shape, and give finite log-densities of 0; an outcome likelihood's ``log_likelihood`` must
+    give one finite number per mask."""
+    name = likelihood.registered_name
+    if likelihood.evidence not in EVIDENCE:
+        raise ValueError(f"likelihood {name!r}: evidence is {likelihood.evidence!r}; use one of: {', '.join(EVIDENCE)}")
+    if likelihood.evidence == "outcomes":
+        masks = torch.stack([torch.zeros(n), torch.ones(n)])
+        ll = likelihood.log_likelihood(masks, torch.ones(1, n))
+        if not isinstance(ll, torch.Tensor) or tuple(ll.shape) != (2,) or not bool(torch.isfinite(ll).all()):
+            got = tuple(ll.shape) if isinstance(ll, torch.Tensor) else type(ll).__name__
+            raise ValueError(f"likelihood {name!r}: log_likelihood(masks (2, {n}), outcomes (1, {n})) gave {got}, not "
+                             "two finite numbers, one per mask")
+        return
+    loc = torch.tensor([[0.0, 0.5, -2.0], [1.0, -0.5, 3.0]])
+    try:
+        d = likelihood.distribution(loc)
+    except NotImplementedError:
+        raise ValueError(f"likelihood {name!r} defines no distribution(loc); return a Pyro distribution of the "
+                         "residuals with loc's shape as its batch shape") from None
+    if not isinstance(d, torch.distributions.Distribution):
+        raise ValueError(f"likelihood {name!r}: distribution(loc) returned a {type(d).__name__}, not a Pyro "
+                         "distribution")
+    if tuple(d.batch_shape) != tuple(loc.shape) or tuple(d.event_shape) != ():
+        raise ValueError(f"likelihood {name!r}: distribution(loc) for loc of shape {tuple(loc.shape)} has batch "
+                         f"shape {tuple(d.batch_shape)} and event shape {tuple(d.event_shape)}; it needs loc's "
+                         "shape as its batch shape and no event shape, one density per residual")
+    lp = d.log_prob(torch.zeros(loc.shape))
+    if not bool(torch.isfinite(lp).all()):
+        raise ValueError(f"likelihood {name!r}: log_prob(0) of residuals {loc.flatten().tolist()} is not finite "
+                         f"({lp.flatten().tolist()}); the critic needs a finite density for every residual")
 
 
 def _positive(kind: str, key: str, value: float, example: float = 1.0) -> float:

@@ -24,7 +24,7 @@ from ..distributions.mrf import EXACT_LIMIT, PairwiseMRF
 from ..graph import SubgoalGraph
 from ._registry import build, make_register
 
-__all__ = ["Prior", "PRIORS", "register_prior", "get_prior", "BernoulliSet", "BetaBernoulliSet"]
+__all__ = ["Prior", "PRIORS", "register_prior", "get_prior", "check_prior", "BernoulliSet", "BetaBernoulliSet"]
 
 PRIORS: dict[str, type] = {}
 register_prior = make_register(PRIORS, "prior", "distribution")
@@ -33,6 +33,28 @@ register_prior = make_register(PRIORS, "prior", "distribution")
 def get_prior(name: str, graph: SubgoalGraph, **params) -> "Prior":
     """Instantiate the prior registered as ``name`` for ``graph`` (unknown names list the registered ones)."""
     return build(PRIORS, "prior", name, graph, **params)
+
+
+def check_prior(prior: "Prior") -> None:
+    """A ``ValueError`` in one line where ``prior.distribution()`` cannot be the critic's p(w): none defined,
+    not a distribution with event shape (N,) and no batch shape, or a log_prob of the empty and the full
+    set that is not two finite numbers (every set q can sample needs a finite log p(w))."""
+    n, name = prior.graph.n, prior.registered_name
+    try:
+        d = prior.distribution()
+    except NotImplementedError:
+        raise ValueError(f"prior {name!r} defines no distribution(); return a Pyro distribution over the "
+                         f"{n} indicators, event shape ({n},)") from None
+    if not isinstance(d, torch.distributions.Distribution):
+        raise ValueError(f"prior {name!r}: distribution() returned a {type(d).__name__}, not a Pyro distribution")
+    if tuple(d.batch_shape) != () or tuple(d.event_shape) != (n,):
+        raise ValueError(f"prior {name!r}: distribution() has batch shape {tuple(d.batch_shape)} and event shape "
+                         f"{tuple(d.event_shape)}; it needs event shape ({n},), one indicator per sub-goal, and no "
+                         "batch shape (e.g. dist.Bernoulli(...).to_event(1))")
+    lp = d.log_prob(torch.stack([torch.zeros(n), torch.ones(n)]))
+    if tuple(lp.shape) != (2,) or not bool(torch.isfinite(lp).all()):
+        raise ValueError(f"prior {name!r}: log_prob of the empty and the full set is {lp.tolist()}, not two finite "
+                         "numbers; every set of sub-goals needs a finite log p(w)")
 
 
 def _positive(kind: str, key: str, value: float) -> float:
