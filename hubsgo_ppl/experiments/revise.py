@@ -57,6 +57,7 @@ from ..envs import get_task
 from ..envs.subset import catalogue_order, check_subset
 from .checkpoint import CHECKPOINT, check_episode_log
 from .lock import run_folder_lock
+from .logger import CSVOutput
 from .io import truncate_csv, write_json, write_text, write_yaml
 from .run import (EPISODE_LOGS, REVISIONS_CSV, RunConfig, RunError, _build, _save,
                   g_star_table, note_unlinked_goals, plot_run_curve, run_config, run_dir_checkpoint, train,
@@ -137,6 +138,15 @@ def _write_revisions_csv(run_dir: Path, upto: int) -> None:
     write_text(run_dir / REVISIONS_CSV, buf.getvalue())
 
 
+def _end_history(run_dir: Path, episodes: int, env_steps: int, settled: bool, g_star: dict[str, Any]) -> None:
+    """The last row of critic_history.csv (cut back with the logs) again, now with the marginals of the
+    revised critic that subgoals.json reads G* from, as a finished run's history ends."""
+    path = run_dir / "critic_history.csv"
+    if path.is_file():
+        CSVOutput(path).write({"episode": episodes, "env_steps": env_steps, "critic": "settled" if settled else "final",
+                               **{n: round(float(m), 5) for n, m in g_star["marginals"].items()}})
+
+
 def apply_revision(run_dir: str | Path, new_spec: str | Path, steps: int | None = None,
                    train_after: bool = True) -> dict[str, Any]:
     """Revise the run's critic spec at its checkpoint (module docstring) without training; returns the
@@ -211,6 +221,7 @@ def _apply_revision(run_dir: Path, new_spec: str | Path, steps: int | None, trai
     _write_revisions_csv(run_dir, number)
     if g_star is not None:      # the run stays ended: its G* is now the revised critic's
         write_json(run_dir / "subgoals.json", g_star)
+        _end_history(run_dir, int(ckpt["episodes"]), done, agent.settled_step is not None, g_star)
     else:
         (run_dir / "subgoals.json").unlink(missing_ok=True)     # G* of the old spec; rewritten when the run ends
     plot_run_curve(run_dir, new)

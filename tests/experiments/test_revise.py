@@ -240,3 +240,22 @@ def test_the_revise_command_says_whether_the_critics_optimiser_restarts(paused, 
     dropped = _spec(tmp_path / "dropped.yaml", "dropped", FIVE, EDGES)
     assert main(["revise", str(changed), "--model", str(dropped), "--no-train"]) == 0
     assert "optimiser restarts" in capsys.readouterr().out
+
+
+def test_a_finished_run_revised_without_training_ends_its_critic_history_with_the_revised_g_star(tmp_path):
+    # the logs are cut back to the checkpoint, which takes the finished run's last history row with them
+    spec = _spec(tmp_path / "initial.yaml", "initial", FIVE + CORNERS, EDGES)
+    run = tmp_path / "run"
+    train(RunConfig(task="keydoor_incorrect", model=str(spec), steps=400, seed=1, overrides=TINY), run, progress=False)
+    end = read_csv_rows(run / "critic_history.csv")[-1]
+    assert end["critic"] in ("settled", "final")
+    record = apply_revision(run, _spec(tmp_path / "dropped.yaml", "dropped", FIVE, EDGES), train_after=False)
+    assert record["finished"]
+    history = read_csv_rows(run / "critic_history.csv")
+    table = yaml.safe_load((run / "subgoals.json").read_text())
+    assert history[-1]["critic"] == end["critic"] and history[-1]["episode"] == end["episode"]
+    assert history[-1]["env_steps"] == end["env_steps"]
+    assert {n: float(history[-1][n]) for n in FIVE} == {n: round(m, 5) for n, m in table["marginals"].items()}
+    assert history[-1]["corner_nw"] == ""                  # a dropped sub-goal has no marginal any more
+    assert sum(r["critic"] != "training" for r in history) == 1
+
