@@ -108,7 +108,9 @@ def plan_transfer(resolved: dict[str, Any], source: str | Path,
     try:
         ckpt = load_checkpoint(src_dir / "checkpoint.pt")
     except CheckpointError as exc:
-        what = str(exc).split("; start a new run")[0].split("; use a checkpoint")[0].split("; point at")[0]
+        what = str(exc)
+        for advice in ("; start a new run", "; use a checkpoint", "; point at", "; train first"):
+            what = what.split(advice)[0]        # the advice meant for the run's own commands, not for a source
         raise TransferError(f"--init-from: {what}; start from another run, or train without --init-from") from None
     src = ckpt.get("config")
     if not isinstance(src, dict) or "agent" not in ckpt:

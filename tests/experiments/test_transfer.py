@@ -215,3 +215,18 @@ def test_other_observation_modes_are_refused_in_one_line(sources, tmp_path, caps
     assert main(["train", "keydoor_moved", "--restart-schedules", "--out", str(out), "--no-progress"]) == 2
     assert "add --init-from RUN" in capsys.readouterr().err
 
+
+
+def _one_error_line(capsys):
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("hubsgo: error: "), err
+    return err[0]
+
+
+def test_a_folder_without_a_checkpoint_is_refused_without_advice_about_resume(tmp_path, capsys):
+    src = tmp_path / "empty"
+    src.mkdir()
+    assert main(["train", "keydoor_moved", "--init-from", str(src), "--steps", "300", "--out", str(tmp_path / "dst"),
+                 "--no-progress", *CLI_TINY]) == 2
+    line = _one_error_line(capsys)
+    assert "no checkpoint here" in line and "--resume" not in line, line
