@@ -63,6 +63,7 @@ from .run import (EPISODE_LOGS, REVISIONS_CSV, RunConfig, RunError, _build, _sav
                   g_star_table, note_unlinked_goals, plot_run_curve, run_config, run_dir_checkpoint, train,
                   warn_goals_left_out)
 from .remap import TransferError, revise_agent_state
+from .restore import restore
 
 __all__ = ["revise", "apply_revision", "load_revision_spec", "spec_changes", "objective_unchanged", "REVISIONS_DIR", "REVISION_FIELDS"]
 
@@ -170,6 +171,7 @@ def _apply_revision(run_dir: Path, new_spec: str | Path, steps: int | None, trai
     if steps is not None and int(steps) <= 0:
         raise RunError(f"--steps must be a positive number of env steps, got {steps}")
     spec = load_revision_spec(new_spec, old)
+    restore(run_dir / CHECKPOINT, ckpt)[1].close()    # a damaged checkpoint: one line, before anything is written
     done = int(ckpt["env_steps"])
     total = int(steps) if steps is not None else int(old["hyper"]["steps"])
     finished = total <= done and steps is None and not train_after

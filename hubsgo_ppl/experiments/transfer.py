@@ -29,6 +29,7 @@ import torch
 
 from ..envs import get_task
 from ..envs.subset import make_subset
+from ..errors import RunError
 from .io import CheckpointError, load_checkpoint
 from .remap import (TransferError, name_index, remap_critic_state, remap_high_state, remap_low_state,  # noqa: F401
                     remap_rows, revise_agent_state)
@@ -96,6 +97,24 @@ def _learned_low(config: dict[str, Any]) -> bool:
     return config.get("agent") in _HIERARCHICAL and config["hyper"].get("low_level", "learned") == "learned"
 
 
+_ELSEWHERE = "start from another run, or train without --init-from"
+
+
+def _cause(exc: Exception) -> str:
+    """What is wrong with a source run's checkpoint, without the advice meant for the run's own commands."""
+    text = " ".join(str(exc).split())
+    for advice in ("; start a new run", "; use a checkpoint", "; point at", "; train first"):
+        text = text.split(advice)[0]
+    return text
+
+
+def _restored(path: Path, ckpt: dict[str, Any]) -> None:
+    from .restore import restore
+
+    env = restore(path, ckpt)[1]
+    env.close()
+
+
 def plan_transfer(resolved: dict[str, Any], source: str | Path,
                   parts: Sequence[str] | str | None = None) -> TransferPlan:
     """Check that the run ``source`` can start the run ``resolved`` describes and load what it needs.
@@ -108,13 +127,14 @@ def plan_transfer(resolved: dict[str, Any], source: str | Path,
     try:
         ckpt = load_checkpoint(src_dir / "checkpoint.pt")
     except CheckpointError as exc:
-        what = str(exc)
-        for advice in ("; start a new run", "; use a checkpoint", "; point at", "; train first"):
-            what = what.split(advice)[0]        # the advice meant for the run's own commands, not for a source
-        raise TransferError(f"--init-from: {what}; start from another run, or train without --init-from") from None
+        raise TransferError(f"--init-from: {_cause(exc)}; {_ELSEWHERE}") from None
     src = ckpt.get("config")
     if not isinstance(src, dict) or "agent" not in ckpt:
         raise TransferError(f"--init-from {src_dir}: not a run of `hubsgo train` (its checkpoint has no config)")
+    try:    # a checkpoint its own config cannot restore is damaged: refused here, not half-way through the remap
+        _restored(src_dir / "checkpoint.pt", ckpt)
+    except (CheckpointError, RunError) as exc:
+        raise TransferError(f"--init-from: {_cause(exc)}; {_ELSEWHERE}") from None
     wanted = _parse_parts(parts)
     why: dict[str, str] = {}
     if not (src["agent"] == "hubsgo" and resolved["agent"] == "hubsgo"):

@@ -259,3 +259,19 @@ def test_a_finished_run_revised_without_training_ends_its_critic_history_with_th
     assert history[-1]["corner_nw"] == ""                  # a dropped sub-goal has no marginal any more
     assert sum(r["critic"] != "training" for r in history) == 1
 
+
+def test_a_damaged_checkpoint_is_refused_in_one_line_and_the_run_is_left_as_it_was(paused, tmp_path, capsys):
+    from hubsgo_ppl.experiments.io import save_torch
+
+    run = _copy(paused, tmp_path)
+    ckpt = load_checkpoint(run / "checkpoint.pt")
+    theta = ckpt["agent"]["filter"]["critic"]["theta"]
+    ckpt["agent"]["filter"]["critic"]["theta"] = theta[:2]       # fewer factors than the run's sub-goals
+    save_torch(run / "checkpoint.pt", ckpt)
+    before = {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()}
+    assert main(["revise", str(run), "--model", str(_spec(tmp_path / "five.yaml", "five", FIVE, EDGES)),
+                 "--no-train"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "does not match its own config" in err[0], err
+    assert {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()} == before
+    assert not (run / "revisions").exists()

@@ -223,6 +223,22 @@ def _one_error_line(capsys):
     return err[0]
 
 
+def test_a_damaged_source_checkpoint_is_refused_in_one_line_before_anything_is_written(tmp_path, capsys):
+    from hubsgo_ppl.experiments.io import save_torch
+
+    src = tmp_path / "src"
+    train(RunConfig(task="keydoor", steps=300, seed=0, overrides=TINY), src, progress=False)
+    ckpt = load_checkpoint(src / "checkpoint.pt")
+    del ckpt["agent"]["filter"]                     # a checkpoint its own config cannot restore
+    save_torch(src / "checkpoint.pt", ckpt)
+    out = tmp_path / "dst"
+    assert main(["train", "keydoor_moved", "--init-from", str(src), "--steps", "300", "--out", str(out),
+                 "--no-progress", *CLI_TINY]) == 2
+    line = _one_error_line(capsys)
+    assert "does not match its own config" in line and "start from another run" in line, line
+    assert not (out / "checkpoint.pt").exists()
+
+
 def test_a_folder_without_a_checkpoint_is_refused_without_advice_about_resume(tmp_path, capsys):
     src = tmp_path / "empty"
     src.mkdir()
