@@ -124,6 +124,10 @@ def cmd_review(args: argparse.Namespace) -> int:
     if succ["episodes"]:
         print(f"achieved on the {succ['episodes']} recent successes: "
               + ", ".join(f"{n} {f:.0%}" for n, f in succ["frequency"].items()))
+    elif (r["achieved"].get("metrics") or {}).get("successes"):
+        print(f"achieved on recent successes: none in the filter's window, which a revision that added sub-goals "
+              f"started afresh, though {r['achieved']['metrics']['successes']} of the last "
+              f"{r['achieved']['metrics']['episodes']} training episodes succeeded")
     else:
         print("achieved on recent successes: no successful episode yet")
     for kind, name in r["files"].items():

@@ -89,9 +89,12 @@ def cmd_revise(args: argparse.Namespace) -> int:
               f"and signs); carried over by name: {k['high_outputs']} high-level outputs")
     print(f"  recorded in {run_dir / 'revisions' / format(r['revision'], '03d')} and {run_dir / 'revisions.csv'}")
     if r.get("finished"):
+        read = ("read from the same recent successes" if r.get("outcomes_kept", 1) or not r["subgoals_added"] else
+                "read without recent successes: the stored ones do not say whether they achieved the added "
+                "sub-goals, so the filter's window starts afresh and the added ones stand where your spec puts them")
         print(f"the run had taken its budget, so it stays finished; {run_dir / 'subgoals.json'} holds the revised "
-              f"critic's G*, read from the same recent successes; to train on: hubsgo train {_run_task(run_dir)} "
-              f"--out {run_dir} --resume --steps TOTAL")
+              f"critic's G*, {read}; to train on: hubsgo train {_run_task(run_dir)} --out {run_dir} --resume "
+              f"--steps TOTAL")
         print(format_ranking(json.loads((run_dir / "subgoals.json").read_text())))
         return 0
     if args.no_train:

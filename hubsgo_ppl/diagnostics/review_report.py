@@ -163,6 +163,10 @@ def render_markdown(r: dict[str, Any]) -> str:
     if succ["episodes"]:
         lines.append(f"- Over the filter's {succ['episodes']} recent successful episodes: "
                      + ", ".join(f"{n} {_pct(freq[n])}" for n in names) + ".")
+    elif (r["achieved"]["metrics"] or {}).get("successes"):
+        lines.append("- No successful episode in the filter's window, which a revision that added sub-goals started "
+                     "afresh (its stored episodes do not say whether they achieved the new ones): the suggestions "
+                     "above that read the recent successes have none to read yet.")
     else:
         lines.append("- No successful episode yet in the filter's window: the critic has had no outcome evidence.")
     m = r["achieved"]["metrics"]

@@ -275,3 +275,29 @@ def test_a_damaged_checkpoint_is_refused_in_one_line_and_the_run_is_left_as_it_w
     assert len(err) == 1 and "does not match its own config" in err[0], err
     assert {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()} == before
     assert not (run / "revisions").exists()
+
+
+def test_a_finished_run_given_new_sub_goals_is_not_said_to_read_g_star_from_successes_it_no_longer_keeps(tmp_path,
+                                                                                                      capsys):
+    from hubsgo_ppl.experiments.io import save_torch
+
+    spec = _spec(tmp_path / "five.yaml", "five", FIVE, EDGES)
+    run = tmp_path / "run"
+    train(RunConfig(task="keydoor_incorrect", model=str(spec), steps=400, seed=1, overrides=TINY), run, progress=False)
+    ckpt = load_checkpoint(run / "checkpoint.pt")
+    ckpt["agent"]["filter"]["outcomes"] = torch.tensor([[1.0, 1.0, 0.0, 0.0, 1.0]] * 20)   # 20 yellow-route wins
+    save_torch(run / "checkpoint.pt", ckpt)
+    rows = list(csv.DictReader((run / "metrics.csv").open()))
+    with (run / "metrics.csv").open("w", newline="") as fh:                                # and their episodes
+        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows({**r, "success": 1} for r in rows)
+    nine = _spec(tmp_path / "nine.yaml", "nine", FIVE + CORNERS, EDGES)
+    assert main(["revise", str(run), "--model", str(nine), "--no-train"]) == 0
+    out = capsys.readouterr().out
+    assert "stays finished" in out and "read from the same recent successes" not in out
+    assert "read without recent successes" in out
+    assert main(["review", str(run), "--no-gif", "--samples", "200"]) == 0
+    out = capsys.readouterr().out
+    assert "no successful episode yet" not in out and "none in the filter's window" in out
+    assert "the critic has had no outcome evidence" not in (run / "review" / "review.md").read_text()
