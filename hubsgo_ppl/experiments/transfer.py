@@ -115,6 +115,18 @@ def _restored(path: Path, ckpt: dict[str, Any]) -> None:
     env.close()
 
 
+def _note_other_landmarks(src_dir: Path, src: dict[str, Any], resolved: dict[str, Any]) -> None:
+    """The egocentric observation has entries per catalogue sub-goal, in the catalogue's order: between
+    catalogues that differ, a transferred network reads one sub-goal's entries as another's."""
+    a, b = (list(get_task(c["task_ref"]).catalogue.names) for c in (src, resolved))
+    if a != b:
+        print(f"hubsgo: note: --init-from {src_dir}: the egocentric observation has entries per catalogue sub-goal, "
+              f"and {src['task']}'s ({', '.join(a)}) are not {resolved['task']}'s ({', '.join(b)}), so networks "
+              f"trained on {src['task']} read {resolved['task']}'s entries as {src['task']}'s sub-goals'; give both "
+              "catalogues the same sub-goals in the same order, or transfer the critic alone (--transfer critic)",
+              file=sys.stderr)
+
+
 def plan_transfer(resolved: dict[str, Any], source: str | Path,
                   parts: Sequence[str] | str | None = None) -> TransferPlan:
     """Check that the run ``source`` can start the run ``resolved`` describes and load what it needs.
@@ -179,6 +191,8 @@ def plan_transfer(resolved: dict[str, Any], source: str | Path,
                   f"so networks trained on {src['task']} read {resolved['task']}'s cells as {src['task']}'s; where "
                   "the two layouts differ, observe egocentrically in both runs (--set env.obs_mode=egocentric), or "
                   "transfer the critic alone (--transfer critic)", file=sys.stderr)
+        if src_mode == "egocentric":
+            _note_other_landmarks(src_dir, src, resolved)
         if "low" in chosen and src_n != dst_n:
             raise TransferError(f"--init-from {src_dir}: action counts differ: {src['task']} has {src_n} actions, "
                                 f"{resolved['task']} {dst_n}; leave out the low level (--transfer critic,high)")

@@ -246,3 +246,16 @@ def test_a_folder_without_a_checkpoint_is_refused_without_advice_about_resume(tm
                  "--no-progress", *CLI_TINY]) == 2
     line = _one_error_line(capsys)
     assert "no checkpoint here" in line and "--resume" not in line, line
+
+
+def test_egocentric_networks_moved_to_another_catalogue_get_a_note(tmp_path, capsys):
+    ego = TINY + ["env.obs_mode=egocentric"]
+    src = tmp_path / "src"
+    train(RunConfig(task="keydoor", steps=300, seed=0, overrides=ego), src, progress=False)
+    capsys.readouterr()
+    for target, noted in (("fourroom", True), ("keydoor_moved", False)):
+        # fourroom's five sub-goals give an observation of keydoor's length, each entry another sub-goal's
+        cfg = RunConfig(task=target, steps=300, seed=0, overrides=ego, init_from=str(src))
+        train(cfg, tmp_path / target, progress=False, max_episodes=0)
+        err = capsys.readouterr().err
+        assert ("the egocentric observation has entries per catalogue sub-goal" in err) == noted, err
