@@ -155,8 +155,16 @@ def plan_transfer(resolved: dict[str, Any], source: str | Path,
     if not (src["agent"] in _HIERARCHICAL and resolved["agent"] in _HIERARCHICAL):
         why["high"] = (f"a high level needs hierarchical agents (hubsgo, hdqn) on both sides (the source run is "
                        f"{src['agent']!r}, this one {resolved['agent']!r})")
+    if src["family"] != resolved["family"]:     # an arm's observation is no maze's: no obs_mode setting bridges them
+        why.setdefault("high", f"a high level reads its task's observations, and the source run is a {src['family']} "
+                               f"task, this one a {resolved['family']} task (the critic alone transfers: --transfer "
+                               "critic)")
     if not (_learned_low(src) and _learned_low(resolved) and src["family"] == resolved["family"]):
         why["low"] = "a low level needs a learned low level of the same kind on both sides (same task family)"
+    if wanted is None and src["family"] != resolved["family"]:
+        raise TransferError(f"--init-from {src_dir}: the source run is a {src['family']} task and this one a "
+                            f"{resolved['family']} task, so their networks read different observations and only the "
+                            "critic can transfer; pass --transfer critic to take it")
     chosen = wanted if wanted is not None else [p for p in PARTS if p not in why]
     refused = [p for p in chosen if p in why]
     if refused:

@@ -259,3 +259,18 @@ def test_egocentric_networks_moved_to_another_catalogue_get_a_note(tmp_path, cap
         train(cfg, tmp_path / target, progress=False, max_episodes=0)
         err = capsys.readouterr().err
         assert ("the egocentric observation has entries per catalogue sub-goal" in err) == noted, err
+
+
+def test_a_transfer_between_families_names_the_critic_instead_of_an_obs_mode_the_target_lacks(tmp_path, capsys):
+    pytest.importorskip("robosuite")
+    src = tmp_path / "maze"
+    train(RunConfig(task="keydoor", steps=300, seed=0, overrides=TINY), src, progress=False)
+    capsys.readouterr()
+    base = ["train", "push_any_one", "--init-from", str(src), "--steps", "300", "--no-progress"]
+    assert main([*base, "--out", str(tmp_path / "arm")]) == 2
+    line = _one_error_line(capsys)
+    assert "only the critic can transfer; pass --transfer critic" in line and "obs_mode" not in line, line
+    assert main([*base, "--transfer", "critic,high", "--out", str(tmp_path / "arm2")]) == 2
+    line = _one_error_line(capsys)
+    assert "cannot transfer the high" in line and "obs_mode" not in line, line
+    assert not (tmp_path / "arm").exists() or not (tmp_path / "arm" / "checkpoint.pt").exists()
