@@ -8,7 +8,7 @@ Each is also importable from the module that raises it (``specs``, ``experiments
 
 from __future__ import annotations
 
-__all__ = ["SpecError", "RunError", "CheckpointError", "ReportError"]
+__all__ = ["SpecError", "RunError", "RunInterrupted", "CheckpointError", "ReportError"]
 
 
 class SpecError(ValueError):
@@ -17,6 +17,11 @@ class SpecError(ValueError):
 
 class RunError(RuntimeError):
     """A run cannot start or continue; the message names the cause and the fix."""
+
+
+class RunInterrupted(RunError):
+    """A run stopped by Ctrl-C (or by its worker's parent dying); the message says how to continue it.
+    Not a refusal of its folder: whoever started it must not start it again on its own."""
 
 
 class CheckpointError(RuntimeError):

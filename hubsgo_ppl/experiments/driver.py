@@ -21,6 +21,7 @@ from typing import Any, Callable, Sequence
 import torch
 
 from ..envs import get_task
+from ..errors import RunInterrupted
 from .callbacks import Callback, CallbackList, TrainingRun, default_callbacks
 from .checkpoint import (CHECKPOINT, EPISODE_LOGS, RUN_FILES, check_episode_log, read_checkpoint, read_config_file,
                          recorded_run)
@@ -63,7 +64,7 @@ def train(cfg: RunConfig, out: str | Path, resume: bool = False, progress: bool 
             return _train(cfg, out, resume, default_callbacks(stop_at, max_episodes, progress, on_episode) + user,
                           where, stop_at)
     except KeyboardInterrupt:
-        raise RunError(_interrupted(out, where)) from None
+        raise RunInterrupted(_interrupted(out, where)) from None
 
 
 def _interrupted(out: Path, where: dict[str, Any]) -> str:

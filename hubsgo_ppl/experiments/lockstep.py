@@ -34,6 +34,7 @@ import torch
 from ..agents.config import HIERARCHICAL
 from ..agents.loop import UPDATE_LOW, HRLLoop
 from ..agents.low_level import GoalDQN
+from ..errors import RunInterrupted
 from .callbacks import default_callbacks
 from .driver import RunSession, _interrupted, train
 from .lock import run_folder_lock
@@ -67,7 +68,7 @@ def train_lockstep(cfg: RunConfig, seeds: list[int], outs: list[Path], resumes: 
                         for i, (seed, out, again, hook, where) in enumerate(zip(seeds, outs, resumes, hooks, wheres))]
             return _Lockstep(sessions).play()
     except KeyboardInterrupt:
-        raise RunError("; ".join(f"seed {s}: {_interrupted(out, w)}" for s, out, w in zip(seeds, outs, wheres))) \
+        raise RunInterrupted("; ".join(f"seed {s}: {_interrupted(out, w)}" for s, out, w in zip(seeds, outs, wheres))) \
             from None
 
 

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ..errors import RunInterrupted
 from ..specs import SpecError
 from .io import CheckpointError
 from .run import CHECKPOINT, RunConfig, RunError
@@ -63,6 +64,8 @@ def run_bundle(jobs: list[Job]) -> list[dict[str, Any]]:
     try:
         summaries = train_seeds(RunConfig(**jobs[0].config), [job.config["seed"] for job in jobs], outs,
                                 resume=resume, progress=False, on_episode=hooks)
+    except RunInterrupted as exc:   # Ctrl-C, or the sweep that started this worker died: stop them all here
+        return [{"ok": False, "refused": True, "error": " ".join(str(exc).split())} for _ in jobs]
     except (RunError, CheckpointError, SpecError) as exc:   # a refusal: the same again on a retry
         if len(jobs) > 1:       # the folder refused is one of them: the others train alone
             return [run_bundle([job])[0] for job in jobs]

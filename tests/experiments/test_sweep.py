@@ -282,3 +282,28 @@ def test_the_seeds_of_a_grid_cell_train_in_lockstep_in_one_worker_each_as_it_wou
     job = {j.run_id: j for j in plan(load_sweep(path)[0], out)}["keydoor/hubsgo/seed2"]
     train(RunConfig(**job.config), tmp_path / "alone", progress=False)
     assert _rows(job.out) == _rows(tmp_path / "alone")
+
+
+def test_an_interrupted_lockstep_cell_stops_its_seeds_rather_than_train_each_alone(tmp_path, monkeypatch):
+    # an orphaned worker (its sweep killed) is interrupted by stop_with_parent; it must not go on with
+    # each seed of its cell alone, unseen and holding their locks, as it does after a refused folder
+    from hubsgo_ppl.experiments import sweep_workers
+
+    raised = []
+
+    def interrupt_once(job):
+        def hook(stats):
+            if not raised:
+                raised.append(job.run_id)
+                raise KeyboardInterrupt
+        return hook
+
+    monkeypatch.setattr(sweep_workers, "_kill_hook", interrupt_once)
+    path = _write(tmp_path, seeds=[0, 1], checkpoint_steps=100, tasks=[{"name": "fourroom", "steps": 3000}])
+    jobs = plan(load_sweep(path)[0], tmp_path / "sweep")
+    check_jobs(jobs, path)
+    assert all(j.lockstep for j in jobs)
+    results = sweep_workers.run_bundle(jobs)
+    assert raised and [r["ok"] for r in results] == [False, False], results
+    assert all("interrupted" in r["error"] and r.get("refused") for r in results), results
+    assert all(run_status(j) != "finished" for j in jobs)
