@@ -172,6 +172,9 @@ class SweepSpec(StrictModel):
                              "rename one of the catalogue files")
         columns = {t.name for t in self.tasks}
         for v in self.variants:
+            if v.tasks == []:
+                raise ValueError(f"variant {v.name!r}: tasks is empty, so it has no run; leave tasks out to run it "
+                                 "on every column, or name some of them")
             bad = sorted(set(v.tasks or []) - columns)
             if bad:
                 raise ValueError(f"variant {v.name!r}: tasks {bad} are not columns of this sweep; "
@@ -295,6 +298,9 @@ def run_sweep(sweep: str | Path, backend: str = "local", workers: int = 2, out: 
     part = select(spec, path, variants, tasks)
     sweep_dir = Path(out) if out is not None else Path("runs") / "sweeps" / spec.name
     jobs = plan(part, sweep_dir, base=path.parent)
+    if not jobs:
+        raise SpecError(f"{path}: no run left: the variants {', '.join(v.name for v in part.variants)} run on none "
+                        f"of the tasks {', '.join(t.name for t in part.tasks)}; choose rows and columns that meet")
     check_jobs(jobs, path)           # a misspelled spec or setting stops the sweep before any run starts
     sweep_dir.mkdir(parents=True, exist_ok=True)
     write_yaml(sweep_dir / "sweep.yaml", {**spec.model_dump(mode="json"), "source": str(path)})

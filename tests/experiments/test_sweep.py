@@ -307,3 +307,15 @@ def test_an_interrupted_lockstep_cell_stops_its_seeds_rather_than_train_each_alo
     assert raised and [r["ok"] for r in results] == [False, False], results
     assert all("interrupted" in r["error"] and r.get("refused") for r in results), results
     assert all(run_status(j) != "finished" for j in jobs)
+
+
+def test_a_grid_without_runs_is_refused_before_anything_is_written(tmp_path):
+    path = _write(tmp_path, variants=[{"name": "hdqn", "agent": "hdqn", "tasks": []}])
+    with pytest.raises(SpecError, match="variant 'hdqn': tasks is empty"):
+        load_sweep(path)
+    path = _write(tmp_path, tasks=[{"name": "fourroom", "steps": 1}, {"name": "keydoor", "steps": 1}],
+                  variants=[{"name": "hdqn", "agent": "hdqn", "tasks": ["keydoor"]}, {"name": "ppo", "agent": "ppo"}])
+    out = tmp_path / "sweep"
+    with pytest.raises(SpecError, match="no run left: the variants hdqn run on none of the tasks fourroom"):
+        run_sweep(path, workers=1, out=out, progress=False, variants=["hdqn"], tasks=["fourroom"])
+    assert not out.exists()
