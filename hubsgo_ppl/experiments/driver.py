@@ -177,6 +177,7 @@ def _start(cfg: RunConfig, out: Path, resume: bool, stop_at: int | None = None
     started = any((out / name).exists() for name in RUN_FILES)
     if started and not ckpt_path.exists():
         _refuse_lost_checkpoint(out)
+        _refuse_foreign(out)
     if resume and (ckpt_path.exists() or not started):
         return _resume(cfg, out, stop_at)
     if ckpt_path.exists():
@@ -339,6 +340,23 @@ def _refuse_lost_checkpoint(out: Path) -> None:
     if last >= 2 * every:
         raise RunError(f"{out}: {CHECKPOINT} is missing, though metrics.csv reaches env step {last:,}, past the "
                        f"checkpoints every {every:,} steps; put the checkpoint back, or choose another --out")
+
+
+def _refuse_foreign(out: Path) -> None:
+    """A folder without a checkpoint holding a config.yaml or CSV log that no run wrote (a folder of the
+    user's own): refuse to start a run there, which would remove them as a killed run's files."""
+    cfg = read_config_file(out)
+    foreign = ["config.yaml"] if cfg is not None and not cfg.keys() & {"task", "agent", "hyper", "seed",
+                                                                       "checkpoint_steps"} else []
+    for name in EPISODE_LOGS:       # every log of a run starts with its header, whose first column is episode
+        with contextlib.suppress(OSError, UnicodeDecodeError):
+            with (out / name).open(encoding="utf-8") as fh:
+                first = fh.readline()
+            if first.strip() and first.split(",", 1)[0].strip() != "episode":
+                foreign.append(name)
+    if foreign:
+        raise RunError(f"{out}: {', '.join(foreign)} not written by `hubsgo train`, which a new run there would "
+                       "replace; move them away, or choose another --out")
 
 
 def _check_writable(out: Path) -> None:

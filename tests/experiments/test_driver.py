@@ -157,3 +157,15 @@ def test_resume_with_the_runs_own_model_prints_no_default_budget_note(tmp_path, 
     capsys.readouterr()
     check_resume(run, task, model=spec)
     assert "no --steps" not in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("files", [{"metrics.csv": "epoch,loss\n1,0.5\n"}, {"critic_history.csv": "step,value\n"},
+                                   {"config.yaml": "my: notes\n", "learning_curve.png": "mine"}])
+def test_a_folder_of_the_users_own_files_under_a_runs_names_is_refused_not_emptied(tmp_path, files):
+    run = tmp_path / "mine"
+    run.mkdir()
+    for name, text in files.items():
+        (run / name).write_text(text)
+    with pytest.raises(RunError, match="not written by `hubsgo train`"):
+        train(_cfg(), run, progress=False)
+    assert {p.name: p.read_text() for p in run.iterdir()} == files
