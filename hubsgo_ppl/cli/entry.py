@@ -66,6 +66,11 @@ def _run(argv: Sequence[str] | None) -> int:
         return 2
     except OSError as exc:      # a folder that cannot be written, a full disk: the file and the reason
         where = f"{exc.filename}: " if exc.filename else ""
+        if isinstance(exc, NotADirectoryError) or (isinstance(exc, FileExistsError) and exc.filename and
+                                                   Path(exc.filename).is_file()):   # mkdir of a file, or through one
+            print(f"hubsgo: error: {where}a file where a folder goes, or in its path; choose another folder",
+                  file=sys.stderr)
+            return 2
         print(f"hubsgo: error: {where}{exc.strerror or exc}; check the folder's permissions and free space",
               file=sys.stderr)
         return 2

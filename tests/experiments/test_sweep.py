@@ -319,3 +319,19 @@ def test_a_grid_without_runs_is_refused_before_anything_is_written(tmp_path):
     with pytest.raises(SpecError, match="no run left: the variants hdqn run on none of the tasks fourroom"):
         run_sweep(path, workers=1, out=out, progress=False, variants=["hdqn"], tasks=["fourroom"])
     assert not out.exists()
+
+
+@pytest.mark.parametrize("where", ["file", "file/sub"])
+def test_a_sweep_or_report_folder_that_is_a_file_is_named_so(tmp_path, capsys, where):
+    from hubsgo_ppl.cli import main
+
+    (tmp_path / "file").write_text("mine")
+    run = tmp_path / "sweep" / "fourroom" / "hdqn" / "seed0"       # a finished run without a recorded budget
+    run.mkdir(parents=True)
+    (run / "metrics.csv").write_text("episode,env_steps,return,success\n0,10,1.0,1\n")
+    out = tmp_path / where
+    assert main(["sweep", str(_write(tmp_path)), "--out", str(out), "--workers", "1", "--no-progress"]) == 2
+    assert main(["report", str(tmp_path / "sweep"), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and all(f"{out}: a file where a folder goes" in line for line in err), err
+    assert (tmp_path / "file").read_text() == "mine"
