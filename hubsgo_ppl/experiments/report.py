@@ -37,57 +37,13 @@ from ..errors import ReportError
 from .checkpoint import checkpoint_env_steps, read_config_file
 from .io import atomic_write, write_text
 from .logger import read_csv_rows
+from .paper import PAPER
 
 __all__ = ["ReportError", "RunSummary", "Cell", "PAPER", "SUCCESS_WINDOW", "collect", "aggregate", "markdown_table",
            "steps_to_success", "success_table", "curves", "write_report"]
 
 #: episodes in the rolling success rate of "steps until 90% success" (the loop's ``outcome_window``)
 SUCCESS_WINDOW = 20
-
-#: The paper's reported numbers (mean, s.e.) by table, row label and task.
-PAPER: dict[str, dict[str, dict[str, tuple[float, float]]]] = {
-    "table1": {
-        "HUBS-GO (specific correlations)": {"fourroom": (0.8904, 0.0044), "keydoor": (0.8763, 0.0053),
-                                            "stack_cubes": (0.8891, 0.0152), "push_any_one": (0.9173, 0.0123),
-                                            "collect_three_balls": (0.9627, 0.0099)},
-        "HUBS-GO (fully connected)": {"fourroom": (0.8416, 0.0879), "keydoor": (0.8580, 0.0999),
-                                      "stack_cubes": (0.8563, 0.1026), "push_any_one": (0.9095, 0.0125),
-                                      "collect_three_balls": (0.9370, 0.0190)},
-        "HUBS-GO (fully independent)": {"fourroom": (0.7114, 0.1196), "keydoor": (0.7425, 0.0723),
-                                        "stack_cubes": (0.8209, 0.1072), "push_any_one": (0.8744, 0.1154),
-                                        "collect_three_balls": (0.8467, 0.1380)},
-        "DDQN": {"fourroom": (0.1899, 0.0077), "keydoor": (0.2107, 0.0109)},
-        "PPO": {"fourroom": (0.6664, 0.0083), "keydoor": (0.7567, 0.0084), "stack_cubes": (0.3934, 0.0068),
-                "push_any_one": (0.3337, 0.0114), "collect_three_balls": (0.3122, 0.0116)},
-        "TD3": {"stack_cubes": (0.4890, 0.0045), "push_any_one": (0.6903, 0.0144),
-                "collect_three_balls": (0.6407, 0.0159)},
-        "hDQN": {"fourroom": (0.4287, 0.0166), "keydoor": (0.4584, 0.0126)},
-        "HIRO": {"fourroom": (0.8250, 0.0054), "keydoor": (0.8332, 0.0064), "stack_cubes": (0.7820, 0.0141),
-                 "push_any_one": (0.8730, 0.0094), "collect_three_balls": (0.8514, 0.0193)},
-        "HIGL": {"fourroom": (0.8447, 0.0172), "keydoor": (0.5439, 0.0210), "stack_cubes": (0.8105, 0.0121),
-                 "push_any_one": (0.8553, 0.0209), "collect_three_balls": (0.6274, 0.0041)},
-    },
-    "table2": {
-        "HUBS-GO (specific sub-goals)": {"fourroom": (0.8904, 0.0044), "keydoor": (0.8763, 0.0053)},
-        "HUBS-GO (incorrect sub-goals)": {"fourroom": (0.7629, 0.0163), "keydoor": (0.7274, 0.0123)},
-        "h-DQN (specific sub-goals)": {"fourroom": (0.4287, 0.0166), "keydoor": (0.4584, 0.0126)},
-        "h-DQN (incorrect sub-goals)": {"fourroom": (0.2438, 0.0068), "keydoor": (0.1430, 0.0072)},
-        "HIGL": {"fourroom": (0.8447, 0.0172), "keydoor": (0.5439, 0.0210)},
-        "HIRO": {"fourroom": (0.8250, 0.0054), "keydoor": (0.8332, 0.0064)},
-    },
-}
-
-
-def _cardinal_rows(rows: dict[str, dict[str, tuple[float, float]]]) -> dict[str, dict[str, tuple[float, float]]]:
-    """The paper's maze baselines most likely ran with the cardinal action set (docs/mazes.md): the rows
-    run on it stand beside the paper's rows of the same agent."""
-    agents = {"HUBS-GO (specific, cardinal actions)": "HUBS-GO (specific correlations)",
-              "hDQN (cardinal actions)": "hDQN", **{f"{a} (cardinal actions)": a for a in ("HIRO", "HIGL", "PPO")}}
-    return {label: {t: rows[agent][t] for t in ("fourroom", "keydoor")} for label, agent in agents.items()
-            if agent in rows}
-
-
-PAPER = {table: rows | _cardinal_rows(rows) for table, rows in PAPER.items()}
 
 
 @dataclass
@@ -349,6 +305,16 @@ def _split_budgets(runs: list[RunSummary], grid: dict[tuple[str, str], int]
     return [r for r in runs if r not in other], other
 
 
+def _nothing_logged(sweep_dir: Path, runs: list[RunSummary], grid: tuple[list[str], list[str], list[int]] | None
+                    ) -> list[str]:
+    """The run folders ``task/variant/seedK`` without an episode logged (a run starting, or stopped before its
+    first episode ended), of the ``grid`` (tasks, variants, seeds) where given."""
+    have = {(r.task, r.variant, f"seed{r.seed}") for r in runs}
+    keys = [(p.parent.parent.name, p.parent.name, p.name) for p in sorted(sweep_dir.glob("*/*/seed*")) if p.is_dir()]
+    return ["/".join(k) for k in keys if k not in have and (grid is None or (
+        k[0] in grid[0] and k[1] in grid[1] and k[2] in {f"seed{s}" for s in grid[2]}))]
+
+
 def write_report(sweep_dir: str | Path, out: str | Path | None = None, bins: int = 40,
                  sweep: str | Path | None = None, notes: list[str] | None = None) -> dict[str, Path]:
     """Write ``results.md`` (tables), ``results.csv`` (per run and aggregated), ``curves.csv`` and one
@@ -366,6 +332,7 @@ def write_report(sweep_dir: str | Path, out: str | Path | None = None, bins: int
     if not sweep_dir.is_dir():
         raise ReportError(f"{sweep_dir}: no such sweep directory; pass the --out folder of `hubsgo sweep`")
     runs = collect(sweep_dir)
+    empty = _nothing_logged(sweep_dir, runs, None)
     if sweep is not None:
         from .sweep import column_folder, load_sweep
 
@@ -374,6 +341,7 @@ def write_report(sweep_dir: str | Path, out: str | Path | None = None, bins: int
         labels = {v.name: v.label or v.name for v in spec.variants}
         table = spec.table
         runs = [r for r in runs if r.task in tasks and r.variant in variants and r.seed in spec.seeds]
+        empty = _nothing_logged(sweep_dir, runs, (tasks, variants, spec.seeds))
         grid = {(column_folder(t.name), v.name): v.steps or t.steps for t in spec.tasks for v in spec.variants}
         runs, other = _split_budgets(runs, grid)
     unfinished = [r for r in runs if not r.finished]     # a sweep still running, or stopped: not in the tables
@@ -409,6 +377,11 @@ def write_report(sweep_dir: str | Path, out: str | Path | None = None, bins: int
         md += ["", f"Left out, short of their budget ({len(unfinished)}; `hubsgo sweep` again finishes them): "
                + ", ".join(f"{r.task}/{r.variant}/seed{r.seed} at {r.done:,} of {r.budget:,} env steps"
                            for r in sorted(unfinished, key=lambda r: (r.task, r.variant, r.seed))) + "."]
+    if empty:
+        md += ["", f"Left out, no episode logged yet ({len(empty)}; a run starting, or stopped before its first "
+               f"episode ended): {', '.join(empty)}."]
+        if notes is not None:
+            notes.append(f"left out {len(empty)} run(s) with no episode logged yet (results.md names them)")
     if other:
         what = ", ".join(f"{r.task}/{r.variant}/seed{r.seed} at {r.budget:,}" for r in
                          sorted(other, key=lambda r: (r.task, r.variant, r.seed)))

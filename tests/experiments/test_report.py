@@ -240,3 +240,22 @@ def test_the_success_table_counts_seeds_at_90_percent_and_reads_g_star(tmp_path)
     # last 10% of 4000 steps: episodes ending at >= 3600 (5 episodes): 1, 1, 0 -> 0.6667 ± 0.3333
     assert "0.6667 ± 0.3333" in row
     assert "{key, goal} 2/3; {goal} 1/3" in row
+
+
+def test_a_run_folder_without_an_episode_logged_is_named_not_dropped_silently(sweep_dir, tmp_path):
+    """A run killed (or still starting) before its first episode ended: named like a run short of its budget."""
+    root, _ = sweep_dir
+    late = root / "keydoor" / "ppo" / "seed3"
+    late.mkdir()
+    (late / "config.yaml").write_text(yaml.safe_dump({"task": "keydoor", "hyper": {"steps": 1000}}))
+    (late / "metrics.csv").write_text("episode,env_steps,length,success,options,explore_eps,filter_eps,return\n")
+    (root / "fourroom" / "ppo" / "seed4").mkdir()
+    notes = []
+    text = write_report(root, out=tmp_path / "rep", notes=notes)["table"].read_text()
+    assert "no episode logged yet (2; " in text and "fourroom/ppo/seed4, keydoor/ppo/seed3." in text
+    assert notes == ["left out 2 run(s) with no episode logged yet (results.md names them)"]
+    grid = tmp_path / "grid.yaml"
+    grid.write_text(yaml.safe_dump({"name": "g", "seeds": [0, 1, 2, 3], "tasks": [{"name": "keydoor", "steps": 1000}],
+                                    "variants": [{"name": "ppo", "agent": "ppo"}]}))
+    text = write_report(root, out=tmp_path / "rep2", sweep=grid)["table"].read_text()
+    assert "no episode logged yet (1; " in text and "keydoor/ppo/seed3." in text and "seed4" not in text
