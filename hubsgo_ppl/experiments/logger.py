@@ -1,7 +1,8 @@
 """The run's logger: Stable-Baselines3's :class:`~stable_baselines3.common.logger.Logger` (``record(key,
 value)`` then ``dump(step)``) with two outputs, a CSV file and TensorBoard.
 
-Tags are namespaced CleanRL-style (``charts/episodic_return``, ``critic/loss``). Outputs: ``metrics.csv``
+Tags are the ``metrics.csv`` columns: the episode's own plain (``return``, ``success``, ``length``), the
+learners' namespaced by part (``critic/loss``, ``high/td_loss``, ``low/td_loss``). Outputs: ``metrics.csv``
 (one row per dump, i.e. per episode) and TensorBoard events.
 
 What comes from SB3 and what does not:
