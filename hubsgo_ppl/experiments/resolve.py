@@ -125,6 +125,11 @@ def resolve(cfg: RunConfig) -> dict[str, Any]:
 
 def resolve_run(cfg: RunConfig) -> ResolvedRun:
     """Everything a run needs, typed (:class:`ResolvedRun`)."""
+    if not isinstance(cfg.task, (str, Path)) or not str(cfg.task):
+        raise RunError(f"task must be a task name or the path of a catalogue, got {cfg.task!r}")
+    if isinstance(cfg.overrides, (str, bytes)) or not all(isinstance(o, str) for o in cfg.overrides):
+        raise RunError(f"overrides must be a list of 'KEY=VALUE' strings, e.g. ['loop.option_steps=30'], got "
+                       f"{cfg.overrides!r}")
     info = get_task(cfg.task)
     if int(cfg.checkpoint_steps) <= 0:
         raise RunError(f"checkpoint_steps must be a positive number of env steps, got {cfg.checkpoint_steps}")

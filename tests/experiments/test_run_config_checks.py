@@ -23,3 +23,13 @@ def test_threads_are_checked_before_torch_reads_them(tmp_path, threads):
 def test_transfer_settings_without_a_source_run_are_refused(change, what):
     with pytest.raises(RunError, match=f"{what} .* from the run given by init_from"):
         resolve_run(RunConfig(task="keydoor", steps=100, **change))
+
+
+@pytest.mark.parametrize("change, says", [(dict(task=None), "task must be a task name or the path of a catalogue"),
+                                          (dict(task=3), "task must be a task name"),
+                                          (dict(overrides="loop.option_steps=30"), "overrides must be a list of"),
+                                          (dict(overrides=[("loop", 30)]), "overrides must be a list of")])
+def test_a_task_or_overrides_of_the_wrong_type_is_one_line(tmp_path, change, says):
+    with pytest.raises(RunError, match=says):
+        train(RunConfig(**{"task": "keydoor", "steps": 100, **change}), tmp_path / "run", progress=False)
+    assert not (tmp_path / "run").exists()
