@@ -192,8 +192,9 @@ def _apply_revision(run_dir: Path, new_spec: str | Path, steps: int | None, trai
 
     changes = spec_changes(old["model_spec"], new["model_spec"])
     if objective_unchanged(changes):
+        after = "G* is read as it was" if finished else "the run goes on as it would have"
         print(f"hubsgo: note: {new_spec} asks for the critic the run already has; it is recorded as revision "
-              f"{number}, and the run goes on as it would have", file=sys.stderr)
+              f"{number}, and {after}", file=sys.stderr)
     warn_goals_left_out(spec.name, old["task_ref"], new.get("subgoals"))
     note_unlinked_goals(new)
     env, agent = _build(new)

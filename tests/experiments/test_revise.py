@@ -301,3 +301,14 @@ def test_a_finished_run_given_new_sub_goals_is_not_said_to_read_g_star_from_succ
     out = capsys.readouterr().out
     assert "no successful episode yet" not in out and "none in the filter's window" in out
     assert "the critic has had no outcome evidence" not in (run / "review" / "review.md").read_text()
+
+
+def test_the_same_spec_again_on_a_finished_run_says_g_star_is_read_as_it_was(tmp_path, capsys):
+    spec = _spec(tmp_path / "initial.yaml", "initial", FIVE, EDGES)
+    run = tmp_path / "run"
+    train(RunConfig(task="keydoor_incorrect", model=str(spec), steps=400, seed=1, overrides=TINY), run, progress=False)
+    capsys.readouterr()
+    assert apply_revision(run, spec, train_after=False)["finished"]
+    err = capsys.readouterr().err
+    assert "asks for the critic the run already has; it is recorded as revision 1, and G* is read as it was" in err
+    assert "goes on" not in err
