@@ -305,6 +305,19 @@ def _split_budgets(runs: list[RunSummary], grid: dict[tuple[str, str], int]
     return [r for r in runs if r not in other], other
 
 
+def _seeds_line(runs: list[RunSummary]) -> str:
+    """The seeds behind the cells: one list where every cell has the same, else each cell's."""
+    by_cell: dict[tuple[str, str], list[int]] = {}
+    for r in runs:
+        by_cell.setdefault((r.task, r.variant), []).append(r.seed)
+    lists = {key: sorted(seeds) for key, seeds in by_cell.items()}
+    if len({tuple(v) for v in lists.values()}) == 1:
+        seeds = next(iter(lists.values()))
+        return f"Seeds: {', '.join(map(str, seeds))} ({len(seeds)}) in every cell."
+    return "Seeds per cell: " + "; ".join(f"{t}/{v}: {', '.join(map(str, s))} ({len(s)})"
+                                          for (t, v), s in sorted(lists.items())) + "."
+
+
 def _nothing_logged(sweep_dir: Path, runs: list[RunSummary], grid: tuple[list[str], list[str], list[int]] | None
                     ) -> list[str]:
     """The run folders ``task/variant/seedK`` without an episode logged (a run starting, or stopped before its
@@ -366,7 +379,8 @@ def write_report(sweep_dir: str | Path, out: str | Path | None = None, bins: int
     title = {"table1": "Table 1", "table2": "Table 2"}.get(table or "", "Table")
     md = [f"# Report of sweep `{sweep_dir}`", "",
           "Cell: the average episodic return over training of each run, then mean ± standard error "
-          "across seeds.", "", markdown_table(cells, tasks, variants, labels, f"{title}: this sweep")]
+          f"across seeds. {_seeds_line(runs)}", "", markdown_table(cells, tasks, variants, labels,
+                                                                  f"{title}: this sweep")]
     if table in PAPER:
         md += ["", _paper_table(table, tasks, variants, labels)]
     md += ["", success_table(runs, tasks, variants, labels)]

@@ -52,6 +52,8 @@ def test_table_cells_are_mean_and_standard_error_of_per_run_averages(sweep_dir):
     paths = write_report(root)
     md = paths["table"].read_text()
     ours = md.split("The paper's")[0]
+    assert ("across seeds. Seeds per cell: fourroom/hubsgo-specific: 0, 1, 2 (3); fourroom/lonely: 0 (1); "
+            "fourroom/ppo: 0, 1, 2 (3); keydoor/hubsgo-specific: 0, 1, 2 (3);") in ours
     for (variant, task), avgs in expected.items():
         line = next(l for l in ours.splitlines() if l.startswith(f"| {VARIANTS[variant]} |"))
         cell = line.strip("|").split("|")[1 + ["fourroom", "keydoor"].index(task)].strip()
@@ -259,3 +261,11 @@ def test_a_run_folder_without_an_episode_logged_is_named_not_dropped_silently(sw
                                     "variants": [{"name": "ppo", "agent": "ppo"}]}))
     text = write_report(root, out=tmp_path / "rep2", sweep=grid)["table"].read_text()
     assert "no episode logged yet (1; " in text and "keydoor/ppo/seed3." in text and "seed4" not in text
+
+
+def test_cells_of_the_same_seeds_state_them_once(tmp_path):
+    for variant in ("a", "b"):
+        for seed in (0, 1, 4):
+            _metrics(tmp_path / "sweep" / "keydoor" / variant / f"seed{seed}", [500, 1000], [0.0, 1.0])
+    md = write_report(tmp_path / "sweep")["table"].read_text()
+    assert "across seeds. Seeds: 0, 1, 4 (3) in every cell." in md and "Seeds per cell" not in md
