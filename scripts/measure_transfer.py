@@ -82,7 +82,7 @@ def one(source: str, seed: int, out: Path, steps: int | None, overrides: list[st
         run = base / arm
         ensure(run, RunConfig(task=target, seed=seed, steps=steps, overrides=overrides,
                               init_from=None if parts is None else str(src), transfer=parts,
-                              restart_schedules=restart or arm in RESTARTED))
+                              restart_schedules=parts is not None and (restart or arm in RESTARTED)))
         metrics = read_csv_rows(run / "metrics.csv")
         last = metrics[-WINDOW:]
         rows.append({"source": source, "target": target, "seed": seed, "arm": arm, "episodes": len(metrics),
