@@ -12,7 +12,7 @@ from typing import Any, Mapping
 import torch
 
 from .. import __version__
-from ..agents.config import AGENTS, ConfigError, resolve_hyper
+from ..agents.config import AGENTS, SB3_SECTIONS, ConfigError, resolve_hyper
 from ..agents.presets import FAMILIES, TASK_PRESETS
 from ..envs import get_task
 from ..envs.subset import catalogue_order, check_subset
@@ -118,6 +118,23 @@ def _episode_budget(info: Any, hyper: Mapping[str, Any]) -> tuple[int, int] | No
     return int(episodes), int(horizon)
 
 
+# a flat baseline's preset section -> the actions it takes (a family without the section has the other kind)
+_SB3_ACTIONS = {"dqn": "discrete", "ppo": "discrete or continuous", "td3": "continuous"}
+
+
+def _check_agent_family(agent: str, family: str) -> None:
+    """Refuse, before any env is built, a flat baseline the task's family has no settings for: one that
+    takes the other kind of actions (td3 on a maze, dqn or ddqn on an arm)."""
+    section = SB3_SECTIONS.get(agent)
+    sb3 = FAMILIES[family].sb3
+    if section is None or section in sb3:
+        return
+    fits = [a for a in AGENTS if SB3_SECTIONS.get(a) in sb3 or (a not in SB3_SECTIONS and
+                                                                 not (family == "gym" and a in ("hiro", "higl")))]
+    raise RunError(f"agent {agent!r} takes {_SB3_ACTIONS.get(section, 'other')} actions and does not train on "
+                   f"{family} tasks; use one of: {', '.join(fits)}")
+
+
 def resolve(cfg: RunConfig) -> dict[str, Any]:
     """Everything a run needs, as plain data (written to config.yaml and into checkpoints)."""
     return resolve_run(cfg).to_dict()
@@ -141,6 +158,7 @@ def resolve_run(cfg: RunConfig) -> ResolvedRun:
         raise RunError(f"a seed is a whole number, 0 or more; got {cfg.seed!r}")
     if cfg.agent not in AGENTS:
         raise RunError(f"unknown agent {cfg.agent!r}; use one of: {', '.join(AGENTS)}")
+    _check_agent_family(cfg.agent, info.family)
     if (cfg.transfer is not None or cfg.restart_schedules) and cfg.init_from is None:
         what = "transfer names what to take" if cfg.transfer is not None else "restart_schedules is about what is taken"
         raise RunError(f"{what} from the run given by init_from; give init_from=RUN (--init-from RUN)")

@@ -33,3 +33,18 @@ def test_a_task_or_overrides_of_the_wrong_type_is_one_line(tmp_path, change, say
     with pytest.raises(RunError, match=says):
         train(RunConfig(**{"task": "keydoor", "steps": 100, **change}), tmp_path / "run", progress=False)
     assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("task, agent, actions, family",
+                         [("keydoor", "td3", "continuous", "minigrid"),
+                          ("push_any_one", "dqn", "discrete", "robosuite"),
+                          ("push_any_one", "ddqn", "discrete", "robosuite")])
+def test_a_flat_baseline_of_the_other_action_kind_is_refused_before_the_env_is_built(tmp_path, monkeypatch, task,
+                                                                                   agent, actions, family):
+    import hubsgo_ppl.experiments.restore as restore
+
+    monkeypatch.setattr(restore, "make_subset", lambda *a, **k: pytest.fail("the env was built"))
+    with pytest.raises(RunError, match=f"agent '{agent}' takes {actions} actions and does not train on {family} "
+                                       "tasks; use one of: .*ppo"):
+        train(RunConfig(task=task, agent=agent, steps=100), tmp_path / "run", progress=False)
+    assert not (tmp_path / "run").exists()
