@@ -12,7 +12,7 @@ from typing import Any, Mapping
 import torch
 
 from .. import __version__
-from ..agents.config import AGENTS, SB3_SECTIONS, ConfigError, resolve_hyper
+from ..agents.config import AGENTS, HIERARCHICAL, SB3_SECTIONS, ConfigError, resolve_hyper
 from ..agents.presets import FAMILIES, TASK_PRESETS
 from ..envs import get_task
 from ..envs.subset import catalogue_order, check_subset
@@ -105,6 +105,16 @@ def _check_env_keys(cfg: RunConfig, info: Any) -> None:
                            f"{', '.join(keys)}")
 
 
+def _check_scripted_maze(agent: str, info: Any, hyper: Mapping[str, Any]) -> None:
+    """Refuse, before any env is built, the scripted maze low level on a registered MiniGrid id: it plans
+    on the symbolic state of an ASCII layout, which MiniGrid's own environments do not give."""
+    options = info.catalogue.options if isinstance(info.catalogue.options, dict) else {}
+    if agent in HIERARCHICAL and info.family == "minigrid" and hyper.get("low_level") == "scripted" \
+            and "gym_id" in options:
+        raise RunError(f"--low-level scripted plans on a maze's ASCII layout, and task {info.name!r} is the "
+                       f"registered MiniGrid environment {options['gym_id']}; train with --low-level learned")
+
+
 def _episode_budget(info: Any, hyper: Mapping[str, Any]) -> tuple[int, int] | None:
     """The budget of a run that gives none, where its family counts budgets in episodes and the task has
     no budget of its own: the family's episodes and the task's horizon (``--set env.horizon``, else the
@@ -181,6 +191,7 @@ def resolve_run(cfg: RunConfig) -> ResolvedRun:
             raise
         raise RunError(str(exc)) from None
     _check_env_keys(cfg, info)
+    _check_scripted_maze(cfg.agent, info, hyper)
     ref = task_ref(cfg.task)
     resolved: dict[str, Any] = {
         "task": info.name, "task_ref": ref, "family": info.family,

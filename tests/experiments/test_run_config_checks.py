@@ -48,3 +48,11 @@ def test_a_flat_baseline_of_the_other_action_kind_is_refused_before_the_env_is_b
                                        "tasks; use one of: .*ppo"):
         train(RunConfig(task=task, agent=agent, steps=100), tmp_path / "run", progress=False)
     assert not (tmp_path / "run").exists()
+
+
+def test_the_scripted_maze_low_level_on_a_registered_minigrid_env_is_refused_before_anything_is_written(tmp_path):
+    with pytest.raises(RunError, match="--low-level scripted plans on a maze's ASCII layout, and task 'doorkey_8x8' "
+                                       "is the registered MiniGrid environment MiniGrid-DoorKey-8x8-v0"):
+        train(RunConfig(task="doorkey_8x8", agent="hdqn", low_level="scripted", steps=100), tmp_path / "run",
+              progress=False)
+    assert not (tmp_path / "run").exists()
