@@ -59,15 +59,29 @@ def _models(agent: str, family: str, low_level: str) -> dict[str, type[Settings]
     return models
 
 
+def _other_models(family: str, low_level: str, base: dict[str, Any]) -> dict[str, type[Settings]]:
+    """The models of every section in ``base``, whichever agent reads it: a ``--set`` item of a section the
+    run's agent does not read is still checked (a sweep's overrides reach every agent of its grid)."""
+    try:
+        models = dict(section_classes("hdqn", family, low_level))
+    except ConfigError:         # a family without that low level: its ``low`` section is not checked here
+        models = {}
+    models.update({"hiro": HIROConfig, "higl": HIGLConfig})
+    for section in set(SB3_SECTIONS.values()) & set(base):
+        models[section] = sb3_model(section)
+    return {k: v for k, v in models.items() if k in base}
+
+
 #: the run's own settings (outside every section), however they are given (``--steps``, ``--set``, a task)
 RunSettings = create_model("RunSettings", __base__=Settings, steps=(integer(1), None),
                            low_level=(choice("learned", "scripted"), None))
 
 
 def _check_item(item: str, base: dict[str, Any], hyper: dict[str, Any], models: dict[str, type[Settings]],
-                agent: str, run_defaults: dict[str, Any]) -> None:
+                agent: str, run_defaults: dict[str, Any], reads: bool = True) -> None:
     """Validate one ``--set`` item against the merged settings ``hyper``; its value, validated, goes back
-    into ``hyper``. Nested keys, and sections the agent does not read, are checked where they are used."""
+    into ``hyper``. ``reads``: whether the agent reads the item's section. Nested keys are checked where
+    they are used."""
     key, _, _ = item.partition("=")
     parts = key.strip().split(".")
     sections = sorted(k for k, v in base.items() if isinstance(v, dict))
@@ -86,8 +100,9 @@ def _check_item(item: str, base: dict[str, Any], hyper: dict[str, Any], models: 
         return
     if len(parts) == 2 and parts[0] in models:
         section, name = parts
-        # the family's value is the default named here
-        parsed = validate(section, models[section], {name: hyper[section][name]}, base.get(section), agent)
+        # the family's value is the default named here; the agent is named where it reads the section
+        parsed = validate(section, models[section], {name: hyper[section][name]}, base.get(section),
+                          agent if reads else None)
         hyper[section][name] = parsed.model_dump(mode="json", include={name})[name]
 
 
@@ -126,9 +141,15 @@ def resolve_hyper(family: str, task: str | None, agent: str, overrides: list[str
             hyper["loop"] = {**hyper.get("loop", {}), **other}
             base = {**base, "loop": {**base.get("loop", {}), **other}}
     models = _models(agent, family, str(hyper.get("low_level", "learned")))
+    others = {k: v for k, v in _other_models(family, str(hyper.get("low_level", "learned")), base).items()
+              if k not in models}
     for item in overrides:
+        section = item.partition("=")[0].strip().split(".")[0]
         try:
-            _check_item(item, base, hyper, models, agent, defaults)
+            if section in others:
+                _check_item(item, base, hyper, others, agent, defaults, reads=False)
+            else:
+                _check_item(item, base, hyper, models, agent, defaults)
         except ConfigError as exc:
             raise ConfigError(f"--set {item}: {exc}", exc.section, exc.key) from None
     validate("", RunSettings, {k: hyper[k] for k in RunSettings.model_fields if k in hyper}, defaults=defaults)

@@ -164,8 +164,10 @@ def test_resolve_merges_preset_task_and_overrides():
         resolve_hyper("minigrid", "keydoor", "ppo", ["ppo.nsteps=8"])
     with pytest.raises(ConfigError, match=r"^--set dqn.gamma=2: dqn.gamma takes a number in \[0, 1\] \(default 0.99\)"):
         resolve_hyper("minigrid", "keydoor", "dqn", ["dqn.gamma=2"])
-    # sections the agent does not read are left as they are
-    assert resolve_hyper("minigrid", "keydoor", "hdqn", ["hiro.whatever=1"])["hiro"]["whatever"] == 1
+    # sections the agent does not read are kept, their keys checked all the same
+    assert resolve_hyper("minigrid", "keydoor", "hdqn", ["hiro.c=3"])["hiro"]["c"] == 3
+    with pytest.raises(ConfigError, match=r"^--set hiro.whatever=1: unknown key 'whatever' in section 'hiro';"):
+        resolve_hyper("minigrid", "keydoor", "hdqn", ["hiro.whatever=1"])
 
 
 @pytest.mark.parametrize("section", ["loop", "high", "low"])
@@ -177,3 +179,20 @@ def test_a_section_set_whole_is_refused_with_an_example_key_that_can_be_set(sect
         resolve_hyper("minigrid", "keydoor", "hubsgo", [f"{example}=1"])
     except ConfigError as exc:          # a value it refuses is fine; the key itself must be one it takes
         assert "unknown key" not in str(exc), str(exc)
+
+
+@pytest.mark.parametrize("family, agent, item, message", [
+    ("minigrid", "hubsgo", "hiro.x=1", "unknown key 'x' in section 'hiro'; valid keys: .*"),
+    ("minigrid", "hubsgo", "hiro.c=abc", "hiro.c takes an integer >= 1"),
+    ("minigrid", "ppo", "dqn.bogus=1", "unknown key 'bogus' in section 'dqn'"),
+    ("minigrid", "ppo", "loop.bogus=1", "unknown key 'bogus' in section 'loop'"),
+    ("minigrid", "hiro", "high.lr=-1", "high.lr takes a finite number > 0"),
+    ("robosuite", "hdqn", "td3.bogus=1", "unknown key 'bogus' in section 'td3'")])
+def test_a_bad_key_of_a_section_the_agent_does_not_read_is_still_refused(family, agent, item, message):
+    with pytest.raises(ConfigError, match=f"--set {re.escape(item)}: {message}"):
+        resolve_hyper(family, None, agent, [item])
+
+
+def test_a_good_key_of_a_section_the_agent_does_not_read_is_kept_for_a_sweep_s_other_agents():
+    assert resolve_hyper("minigrid", None, "hubsgo", ["hiro.c=5"])["hiro"]["c"] == 5
+    assert resolve_hyper("minigrid", None, "ppo", ["loop.option_steps=5"])["loop"]["option_steps"] == 5
