@@ -204,6 +204,9 @@ def resolve_run(cfg: RunConfig) -> ResolvedRun:
     if cfg.graph is not None and cfg.agent != "hubsgo":
         raise RunError(f"--graph {cfg.graph} sets the critic's graph, and agent {cfg.agent!r} has no critic; "
                        "drop --graph, or train --agent hubsgo")
+    if cfg.model is not None and cfg.agent not in HIERARCHICAL:
+        raise RunError(f"--model {cfg.model} sets the critic spec and the candidate sub-goals, and agent {cfg.agent!r} "
+                       "chooses from no sub-goal catalogue; drop --model, or train --agent hubsgo or hdqn")
     if cfg.agent == "hubsgo" or cfg.model is not None:
         from ..specs import ModelSpec, SpecError, for_family, list_model_specs, load_model_spec, match_subgoals
 

@@ -56,3 +56,12 @@ def test_the_scripted_maze_low_level_on_a_registered_minigrid_env_is_refused_bef
         train(RunConfig(task="doorkey_8x8", agent="hdqn", low_level="scripted", steps=100), tmp_path / "run",
               progress=False)
     assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("agent", ["ppo", "hiro", "higl", "ddqn"])
+def test_a_critic_spec_for_an_agent_without_sub_goals_is_refused_as_a_graph_is(tmp_path, agent):
+    with pytest.raises(RunError, match=f"--model keydoor-specific sets the critic spec .* agent '{agent}' chooses "
+                                       "from no sub-goal catalogue"):
+        train(RunConfig(task="keydoor", agent=agent, model="keydoor-specific", steps=100), tmp_path / "run",
+              progress=False)
+    assert not (tmp_path / "run").exists()
