@@ -65,3 +65,15 @@ def test_a_critic_spec_for_an_agent_without_sub_goals_is_refused_as_a_graph_is(t
         train(RunConfig(task="keydoor", agent=agent, model="keydoor-specific", steps=100), tmp_path / "run",
               progress=False)
     assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("change, given", [(dict(agent="ppo", low_level="learned"), "--low-level learned"),
+                                           (dict(agent="hiro", low_level="scripted"), "--low-level scripted"),
+                                           (dict(agent="td3", overrides=["low_level=learned"]),
+                                            "--set low_level=learned")])
+def test_a_low_level_for_an_agent_without_the_hrl_loop_is_refused(tmp_path, change, given):
+    # on an arm task it changed only the budget (the learned low level's) of an agent that has no such choice
+    with pytest.raises(RunError, match=f"^{given} picks the low level of hubsgo and hdqn, and agent"):
+        train(RunConfig(task="push_any_one", steps=None if "overrides" in change else 100, **change),
+              tmp_path / "run", progress=False)
+    assert not (tmp_path / "run").exists()
