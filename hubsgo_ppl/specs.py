@@ -196,7 +196,10 @@ def own_component(kind: str, name: str) -> None:
 
     from .infer import likelihoods, priors
 
-    table, base = (priors.PRIORS, priors.Prior) if kind == "prior" else (likelihoods.LIKELIHOODS, likelihoods.Likelihood)
+    if kind == "prior":
+        table, base = priors.PRIORS, priors.Prior
+    else:
+        table, base = likelihoods.LIKELIHOODS, likelihoods.Likelihood
     module, sep, qualname = name.partition(":")
     if not sep or name in table:
         return
