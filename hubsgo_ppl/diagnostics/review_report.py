@@ -113,8 +113,9 @@ def render_markdown(r: dict[str, Any]) -> str:
     if "suggested_spec" in r["files"]:
         added = ("; positive edges added to the goal that G* leaves out" if r.get("suggested_links")
                  else "; nothing added")
-        dropped = ("no sub-goal dropped: the drops above are the critic's starting values, and a spec drops only "
-                   "what this run's successes leave out" if not r.get("critic_updates", 1) else
+        dropped = ("no sub-goal dropped and no edge removed for what G* holds: the critic's starting values are "
+                   "your spec's prior, and a spec changes only for what this run's critic learned"
+                   if not r.get("critic_updates", 1) else
                    "sub-goals dropped only where fewer than half of the recent successes achieved them")
         lines += ["", f"`suggested_spec.yaml`, next to this file, is your spec with these changes applied ({dropped}"
                   f"{added}): edit "

@@ -16,9 +16,9 @@ def suggested_spec(r: Mapping[str, Any], spec: Mapping[str, Any], rare: float = 
       edges (without successes, or before the critic's first update, nothing is dropped: the marginals
       are then the prior's, not evidence);
     - give each flagged edge its learned sign, and each edge left unknown with a learned sign that sign;
-    - remove each negative edge whose two sub-goals every recent success achieved, and each
-      positive edge that holds in G*, or above the drop threshold, a sub-goal most recent successes
-      skipped;
+    - remove each negative edge whose two sub-goals every recent success achieved, and, once the critic
+      has updated, each positive edge that holds in G*, or above the drop threshold, a sub-goal most
+      recent successes skipped;
     - where G* leaves out the goal that every recent success reached, add the positive edges of
       :func:`suggested_links` (what most successes achieved, linked to the goal); a graph preset without
       edges (``independent``) becomes ``specific`` with those links as its only edges (the edges the
@@ -34,8 +34,9 @@ def suggested_spec(r: Mapping[str, Any], spec: Mapping[str, Any], rare: float = 
         keep, drop = list(spec["subgoals"]), set()
     sign = {frozenset((c["u"], c["v"])): c["learned"] for c in r.get("flagged_edges", []) + r.get("suggested_signs", [])}
     unlink = {frozenset((c["u"], c["v"])) for c in r.get("negative_edges_achieved_together", [])}
-    unlink |= {frozenset((d["name"], v)) for d in r.get("held_by_edges", []) + r.get("held_up_by_edges", [])
-               for v in d["positive_edges"]}
+    if learned:     # G* and the marginals before the first update are the prior's: no edge holds them up yet
+        unlink |= {frozenset((d["name"], v)) for d in r.get("held_by_edges", []) + r.get("held_up_by_edges", [])
+                   for v in d["positive_edges"]}
     edges, seen = [], set()
     for u, v, s in spec.get("edges", []):
         e = frozenset((u, v))

@@ -395,7 +395,7 @@ def test_drops_before_the_critics_first_update_are_called_its_starting_values(ru
     # the suggested spec keeps every sub-goal, and review.md says so rather than "these changes applied" alone
     kept = yaml.safe_load((tmp_path / "rv0" / "suggested_spec.yaml").read_text())["subgoals"]
     assert {d["name"] for d in r["suggested_drops"]} <= set(kept)
-    assert "no sub-goal dropped: the drops above are the critic's starting values" in md0
+    assert "no sub-goal dropped and no edge removed for what G* holds: the critic's starting values are your" in md0
     assert main(["review", str(run), "--out", str(tmp_path / "cli0"), "--no-gif", "--threshold", "0.5"]) == 0
     assert "(the critic has not updated on this run yet: its starting values, not what this run learned)" in capsys.readouterr().out
     r = review(run, out=tmp_path / "rv_none", gif=False, threshold=0.0)        # nothing to suggest, and no evidence
@@ -436,6 +436,8 @@ def test_the_suggested_spec_unlinks_what_positive_edges_hold_up_outside_g_star()
                                                     "positive_edges": ["goal"]}]}
     new = suggested_spec(r, spec)
     assert new["subgoals"] == spec["subgoals"] and new["edges"] == spec["edges"][:2]
+    # before the critic's first update G* is the prior's, which the edges shape: they stay
+    assert suggested_spec({**r, "critic_updates": 0}, spec)["edges"] == spec["edges"]
 
 
 def test_the_suggested_spec_links_the_route_when_g_star_leaves_out_the_goal():
