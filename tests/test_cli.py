@@ -58,6 +58,28 @@ def test_train_subgoals_evaluate_round_trip(tmp_path, capsys):
     assert json.loads((run / "eval.json").read_text())["break_cycles"] is False
 
 
+
+def test_evaluate_on_a_run_folder_it_cannot_write_still_prints_its_result(tmp_path, capsys, monkeypatch):
+    import errno
+
+    from hubsgo_ppl.experiments import run as run_module
+
+    run = tmp_path / "run"
+    assert main(["train", "keydoor", "--steps", "300", "--seed", "1", "--out", str(run), "--no-progress",
+                 *TINY]) == 0
+    capsys.readouterr()
+
+    def read_only(path, obj):
+        raise PermissionError(errno.EACCES, "Permission denied", str(path))
+
+    monkeypatch.setattr(run_module, "write_json", read_only)
+    assert main(["evaluate", str(run), "--episodes", "2"]) == 0
+    captured = capsys.readouterr()
+    assert "greedy return" in captured.out and not (run / "eval.json").exists()
+    assert captured.err.strip() == (f"hubsgo: warning: {run / 'eval.json'}: not written (Permission denied); the "
+                                    "result is only printed")
+
+
 def test_an_empty_most_probable_set_is_explained_under_the_table():
     from hubsgo_ppl.cli.show import format_ranking
 

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -110,5 +111,9 @@ def evaluate(run_dir: str | Path, episodes: int = 10, seed: int | None = None,
         opt = float(np.mean(optimal))
         result["optimal_return"] = opt
         result["fraction_of_optimal"] = result["mean_return"] / opt if opt > 0 else float("nan")
-    write_json(run_dir / "eval.json", result)
+    try:
+        write_json(run_dir / "eval.json", result)
+    except OSError as exc:      # a run folder shared read-only: the result is still returned (and printed)
+        print(f"hubsgo: warning: {run_dir / 'eval.json'}: not written ({exc.strerror or exc}); the result is "
+              "only printed", file=sys.stderr)
     return result
