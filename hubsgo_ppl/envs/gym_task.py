@@ -161,18 +161,25 @@ def _test(sg: SubgoalDef, source: str) -> Callable[[Any, Any, dict, bool], bool]
     return lambda env, obs, info, success: _truth(fn(env, obs, info, **rest), f"{where}: args.fn {sg.args['fn']!r}")
 
 
+def _bind_error(fn: Callable[..., Any], *args: Any, **kwargs: Any) -> TypeError | None:
+    """Why ``fn(*args, **kwargs)`` would not bind to ``fn``'s signature; None where it would, or where
+    ``fn`` has no signature to read (a builtin: called as it is)."""
+    try:
+        inspect.signature(fn).bind(*args, **kwargs)
+    except TypeError as exc:
+        return exc
+    except ValueError:
+        pass
+    return None
+
+
 def _check_call(fn: Callable[..., Any], rest: dict[str, Any], where: str) -> None:
     """Refuse, in one line, a predicate that cannot be called as ``fn(env, obs, info, **rest)``."""
-    try:
-        signature = inspect.signature(fn)
-    except (TypeError, ValueError):     # a builtin without a signature: called as it is
-        return
-    try:
-        signature.bind(None, None, None, **rest)
-    except TypeError as exc:
+    exc = _bind_error(fn, None, None, None, **rest)
+    if exc is not None:
         call = ", ".join(["env", "obs", "info"] + [f"{k}=..." for k in rest])
         raise SpecError(f"{where} cannot be called as fn({call}) ({exc}); a predicate takes the env, its "
-                        "observation and its info, then the sub-goal's other args by name") from None
+                        "observation and its info, then the sub-goal's other args by name")
 
 
 def _truth(value: Any, where: str, fix: str = "return a bool, e.g. bool(x.any()) or bool(x.all())") -> bool:
@@ -215,14 +222,9 @@ def _build(options: GymOptions, source: str, kwargs: dict[str, Any]) -> gym.Env:
 
 def _check_kwargs(creator: Callable[..., Any], kwargs: dict[str, Any], source: str, name: str) -> None:
     """Refuse, in one line, keyword arguments the env's constructor does not take."""
-    try:
-        signature = inspect.signature(creator)
-    except (TypeError, ValueError):     # no signature to read: the constructor says it itself
-        return
-    try:
-        signature.bind(**kwargs)
-    except TypeError as exc:
-        raise _kwargs_error(source, name, kwargs, exc) from None
+    exc = _bind_error(creator, **kwargs)
+    if exc is not None:
+        raise _kwargs_error(source, name, kwargs, exc)
 
 
 def _kwargs_error(source: str, name: str, kwargs: dict[str, Any], exc: Exception) -> SpecError:

@@ -145,6 +145,11 @@ def _check_agent_family(agent: str, family: str) -> None:
                    f"{family} tasks; use one of: {', '.join(fits)}")
 
 
+def _set_items(overrides: list[str], key: str) -> list[str]:
+    """The ``--set`` items that set the run's own setting ``key`` (``steps``, ``low_level``)."""
+    return [o for o in overrides if o.split("=", 1)[0].strip() == key]
+
+
 def resolve(cfg: RunConfig) -> dict[str, Any]:
     """Everything a run needs, as plain data (written to config.yaml and into checkpoints)."""
     return resolve_run(cfg).to_dict()
@@ -172,13 +177,13 @@ def resolve_run(cfg: RunConfig) -> ResolvedRun:
     if (cfg.transfer is not None or cfg.restart_schedules) and cfg.init_from is None:
         what = "transfer names what to take" if cfg.transfer is not None else "restart_schedules is about what is taken"
         raise RunError(f"{what} from the run given by init_from; give init_from=RUN (--init-from RUN)")
-    low_set = [o for o in cfg.overrides if o.split("=", 1)[0].strip() == "low_level"]
+    low_set = _set_items(cfg.overrides, "low_level")
     if (cfg.low_level is not None or low_set) and cfg.agent not in HIERARCHICAL:
         given = f"--low-level {cfg.low_level}" if cfg.low_level is not None else f"--set {low_set[-1]}"
         own = "its own goal-conditioned low level" if cfg.agent in ("hiro", "higl") else "no low level"
         raise RunError(f"{given} picks the low level of hubsgo and hdqn, and agent {cfg.agent!r} has {own}; "
                        "drop it")
-    budget_set = [o for o in cfg.overrides if o.split("=", 1)[0].strip() == "steps"]
+    budget_set = _set_items(cfg.overrides, "steps")
     if cfg.steps is not None and budget_set:
         raise RunError(f"the budget is given twice, --steps {cfg.steps} and --set {budget_set[-1]}; give it once")
     try:        # the preset, the task's settings and --set merged and validated (agents/config.py)
