@@ -59,6 +59,20 @@ def _models(agent: str, family: str, low_level: str) -> dict[str, type[Settings]
     return models
 
 
+def read_sections(agent: str, family: str, low_level: str) -> list[str]:
+    """The settings sections ``agent`` reads, sorted."""
+    return sorted(_models(agent, family, low_level))
+
+
+def unread_items(agent: str, family: str, low_level: str, overrides: Sequence[str]) -> list[str]:
+    """The ``--set`` items of an agent's section that ``agent`` does not read (``hiro.c`` for higl): checked,
+    since a sweep gives its overrides to every agent of its grid, and then unused."""
+    unread = {"loop", "high", "low", "hiro", "higl", *SB3_SECTIONS.values()} - set(read_sections(agent, family,
+                                                                                                low_level))
+    return [item for item in overrides
+            if "." in item.partition("=")[0] and item.partition("=")[0].strip().split(".")[0] in unread]
+
+
 def _other_models(family: str, low_level: str, base: dict[str, Any]) -> dict[str, type[Settings]]:
     """The models of every section in ``base``, whichever agent reads it: a ``--set`` item of a section the
     run's agent does not read is still checked (a sweep's overrides reach every agent of its grid)."""

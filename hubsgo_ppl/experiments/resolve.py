@@ -12,7 +12,7 @@ from typing import Any, Mapping
 import torch
 
 from .. import __version__
-from ..agents.config import AGENTS, HIERARCHICAL, SB3_SECTIONS, ConfigError, resolve_hyper
+from ..agents.config import AGENTS, HIERARCHICAL, SB3_SECTIONS, ConfigError, read_sections, resolve_hyper, unread_items
 from ..agents.presets import FAMILIES, TASK_PRESETS
 from ..envs import get_task
 from ..envs.subset import catalogue_order, check_subset
@@ -203,6 +203,12 @@ def resolve_run(cfg: RunConfig) -> ResolvedRun:
         raise RunError(str(exc)) from None
     _check_env_keys(cfg, info)
     _check_scripted_maze(cfg.agent, info, hyper)
+    low = str(hyper.get("low_level", "learned"))
+    unread = unread_items(cfg.agent, info.family, low, cfg.overrides)
+    if unread:
+        reads = read_sections(cfg.agent, info.family, low)
+        print(f"hubsgo: note: --set {', '.join(unread)}: agent {cfg.agent!r} reads none of it (its sections: "
+              f"{', '.join(reads) or 'none'}); checked, then unused", file=sys.stderr)
     ref = task_ref(cfg.task)
     resolved: dict[str, Any] = {
         "task": info.name, "task_ref": ref, "family": info.family,

@@ -196,3 +196,16 @@ def test_a_bad_key_of_a_section_the_agent_does_not_read_is_still_refused(family,
 def test_a_good_key_of_a_section_the_agent_does_not_read_is_kept_for_a_sweep_s_other_agents():
     assert resolve_hyper("minigrid", None, "hubsgo", ["hiro.c=5"])["hiro"]["c"] == 5
     assert resolve_hyper("minigrid", None, "ppo", ["loop.option_steps=5"])["loop"]["option_steps"] == 5
+
+
+def test_a_run_names_the_set_items_its_agent_does_not_read(capsys):
+    from hubsgo_ppl.agents.config import unread_items
+    from hubsgo_ppl.experiments.resolve import resolve
+    from hubsgo_ppl.experiments.resolved import RunConfig
+
+    assert unread_items("higl", "minigrid", "learned", ["hiro.c=5", "higl.c=5", "steps=9", "env.x=1"]) == ["hiro.c=5"]
+    assert unread_items("hubsgo", "minigrid", "learned", ["low.lr=0.01", "ppo.n_steps=64"]) == ["ppo.n_steps=64"]
+    resolve(RunConfig(task="keydoor", agent="higl", overrides=["hiro.c=5"]))
+    assert "--set hiro.c=5: agent 'higl' reads none of it (its sections: higl)" in capsys.readouterr().err
+    resolve(RunConfig(task="keydoor", agent="higl", overrides=["higl.c=5"]))
+    assert "reads none of it" not in capsys.readouterr().err
