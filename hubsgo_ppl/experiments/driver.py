@@ -178,6 +178,8 @@ def _start(cfg: RunConfig, out: Path, resume: bool, stop_at: int | None = None
     if started and not ckpt_path.exists():
         _refuse_lost_checkpoint(out)
         _refuse_foreign(out)
+    if not started and not ckpt_path.exists():
+        _refuse_nested(out)
     if resume and (ckpt_path.exists() or not started):
         return _resume(cfg, out, stop_at)
     if ckpt_path.exists():
@@ -340,6 +342,20 @@ def _refuse_lost_checkpoint(out: Path) -> None:
     if last >= 2 * every:
         raise RunError(f"{out}: {CHECKPOINT} is missing, though metrics.csv reaches env step {last:,}, past the "
                        f"checkpoints every {every:,} steps; put the checkpoint back, or choose another --out")
+
+
+def _refuse_nested(out: Path) -> None:
+    """A new run's folder neither holds runs (a multi-seed run's ``seedK`` folders) nor lies in one: the
+    commands that read a folder would take the one run for the other's."""
+    def is_run(folder: Path) -> bool:
+        return (folder / CHECKPOINT).is_file() or (folder / "config.yaml").is_file()
+    inner = sorted(c.name for c in out.iterdir() if c.is_dir() and is_run(c)) if out.is_dir() else []
+    if inner:
+        raise RunError(f"{out} holds runs of its own ({', '.join(inner[:3])}{', ...' if len(inner) > 3 else ''}); "
+                       "a run trained there would mix its files with theirs; choose another --out")
+    if is_run(out.parent):
+        raise RunError(f"{out.parent} is a run's folder; a run trained in {out.name}/ inside it would be read as "
+                       "part of it; choose another --out")
 
 
 def _refuse_foreign(out: Path) -> None:

@@ -169,3 +169,14 @@ def test_a_folder_of_the_users_own_files_under_a_runs_names_is_refused_not_empti
     with pytest.raises(RunError, match="not written by `hubsgo train`"):
         train(_cfg(), run, progress=False)
     assert {p.name: p.read_text() for p in run.iterdir()} == files
+
+
+def test_a_run_is_neither_trained_over_the_seed_folders_of_another_nor_inside_a_run(tmp_path, capsys):
+    train(_cfg(steps=200), tmp_path / "runs" / "seed0", progress=False)
+    before = sorted(p.name for p in (tmp_path / "runs").iterdir())
+    with pytest.raises(RunError, match=r"runs holds runs of its own \(seed0\)"):
+        train(_cfg(steps=200), tmp_path / "runs", progress=False)
+    with pytest.raises(RunError, match="seed0 is a run's folder"):
+        train(_cfg(steps=200), tmp_path / "runs" / "seed0" / "seed1", progress=False)
+    assert sorted(p.name for p in (tmp_path / "runs").iterdir()) == before
+    assert not (tmp_path / "runs" / "seed0" / "seed1").exists()
