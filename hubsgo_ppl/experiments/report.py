@@ -248,7 +248,8 @@ def _binned(run: RunSummary, edges: np.ndarray) -> pd.Series:
 
 def curves(runs: list[RunSummary], task: str, variants: list[str], bins: int = 40
            ) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """variant -> (bin centres, mean, s.e.) of the binned learning curves on ``task``."""
+    """variant -> (bin centres, mean, s.e.) of the binned learning curves on ``task``; the s.e. is NaN in a
+    bin where fewer than two runs have a value (one run's curve has no spread to show)."""
     mine = [r for r in runs if r.task == task]
     if not mine:
         return {}
@@ -263,7 +264,7 @@ def curves(runs: list[RunSummary], task: str, variants: list[str], bins: int = 4
         table = pd.concat(per_run, axis=1, ignore_index=True)    # bins x runs
         n = table.count(axis=1)
         mean = table.mean(axis=1)                               # NaN where no run has a value yet
-        se = (table.std(axis=1, ddof=1) / np.sqrt(n)).where(n > 1, 0.0)
+        se = (table.std(axis=1, ddof=1) / np.sqrt(n)).where(n > 1, np.nan)
         out[v] = (centres, mean.to_numpy(), se.to_numpy())
     return out
 
@@ -426,9 +427,11 @@ def write_report(sweep_dir: str | Path, out: str | Path | None = None, bins: int
         data = curves(runs, t, variants, bins)
         if not data:
             continue
-        paths[f"curve_{t}"] = _plot(t, data, labels, out / f"curve_{t}.png")
+        seeds = {v: sum(r.task == t and r.variant == v for r in runs) for v in data}
+        named = {v: f"{labels.get(v, v)} ({seeds[v]} seed{'s' * (seeds[v] != 1)})" for v in data}
+        paths[f"curve_{t}"] = _plot(t, data, named, out / f"curve_{t}.png")
         for v, (x, m, se) in data.items():
             curve_rows += [{"task": t, "variant": v, "env_steps": float(xi), "mean_return": float(mi),
-                            "se": float(si)} for xi, mi, si in zip(x, m, se)]
+                            "se": float(si) if math.isfinite(si) else ""} for xi, mi, si in zip(x, m, se)]
     paths["curves_csv"] = write_text(out / "curves.csv", _csv(curve_rows))
     return paths

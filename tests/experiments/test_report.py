@@ -103,7 +103,24 @@ def test_learning_curves_bin_by_steps_and_carry_forward(tmp_path):
     run1 = np.array([np.nan, 0.2, 0.2, 0.6])        # nothing before its first episode
     np.testing.assert_allclose(mean, np.nanmean(np.vstack([run0, run1]), 0))
     np.testing.assert_allclose(se[1:], np.std(np.vstack([run0, run1])[:, 1:], 0, ddof=1) / np.sqrt(2))
-    assert se[0] == 0.0
+    assert np.isnan(se[0])                          # one run in the bin: no spread to draw
+
+
+def test_a_curve_of_one_seed_is_named_so_and_has_no_band(tmp_path, monkeypatch):
+    from hubsgo_ppl.experiments import report
+
+    root = tmp_path / "s"
+    _metrics(root / "keydoor" / "a" / "seed0", [10, 20, 60, 100], [0.0, 1.0, 1.0, 0.0])
+    _, _, se = curves(collect(root), "keydoor", ["a"], bins=4)["a"]
+    assert np.isnan(se).all()
+    drawn = {}
+    plot = report._plot
+    monkeypatch.setattr(report, "_plot", lambda t, data, labels, path: drawn.update(labels) or plot(t, data, labels,
+                                                                                                    path))
+    paths = write_report(root)
+    assert drawn == {"a": "a (1 seed)"}
+    rows = list(csv.DictReader(open(paths["curves_csv"])))
+    assert rows and {r["se"] for r in rows} == {""}
 
 
 def test_report_errors_name_the_problem(tmp_path):
