@@ -115,7 +115,7 @@ def _restored(path: Path, ckpt: dict[str, Any]) -> None:
     env.close()
 
 
-def _note_other_landmarks(src_dir: Path, src: dict[str, Any], resolved: dict[str, Any]) -> None:
+def _note_other_landmarks(src_dir: Path, src: dict[str, Any], resolved: dict[str, Any], alt: str) -> None:
     """The egocentric observation has entries per catalogue sub-goal, in the catalogue's order: between
     catalogues that differ, a transferred network reads one sub-goal's entries as another's."""
     a, b = (list(get_task(c["task_ref"]).catalogue.names) for c in (src, resolved))
@@ -123,8 +123,7 @@ def _note_other_landmarks(src_dir: Path, src: dict[str, Any], resolved: dict[str
         print(f"hubsgo: note: --init-from {src_dir}: the egocentric observation has entries per catalogue sub-goal, "
               f"and {src['task']}'s ({', '.join(a)}) are not {resolved['task']}'s ({', '.join(b)}), so networks "
               f"trained on {src['task']} read {resolved['task']}'s entries as {src['task']}'s sub-goals'; give both "
-              "catalogues the same sub-goals in the same order, or transfer the critic alone (--transfer critic)",
-              file=sys.stderr)
+              f"catalogues the same sub-goals in the same order, or {alt}", file=sys.stderr)
 
 
 def plan_transfer(resolved: dict[str, Any], source: str | Path,
@@ -155,16 +154,19 @@ def plan_transfer(resolved: dict[str, Any], source: str | Path,
     if not (src["agent"] in _HIERARCHICAL and resolved["agent"] in _HIERARCHICAL):
         why["high"] = (f"a high level needs hierarchical agents (hubsgo, hdqn) on both sides (the source run is "
                        f"{src['agent']!r}, this one {resolved['agent']!r})")
+    # what to do where the networks cannot carry over: the critic alone, where both runs have one
+    alt = ("transfer the critic alone (--transfer critic)" if "critic" not in why
+           else f"train without --init-from (no critic to transfer: the runs are {src['agent']} and "
+                f"{resolved['agent']})")
     if src["family"] != resolved["family"]:     # an arm's observation is no maze's: no obs_mode setting bridges them
         why.setdefault("high", f"a high level reads its task's observations, and the source run is a {src['family']} "
-                               f"task, this one a {resolved['family']} task (the critic alone transfers: --transfer "
-                               "critic)")
+                               f"task, this one a {resolved['family']} task ({alt})")
     if not (_learned_low(src) and _learned_low(resolved) and src["family"] == resolved["family"]):
         why["low"] = "a low level needs a learned low level of the same kind on both sides (same task family)"
     if wanted is None and src["family"] != resolved["family"]:
         raise TransferError(f"--init-from {src_dir}: the source run is a {src['family']} task and this one a "
-                            f"{resolved['family']} task, so their networks read different observations and only the "
-                            "critic can transfer; pass --transfer critic to take it")
+                            f"{resolved['family']} task, so their networks read different observations and only a "
+                            f"critic could transfer; {alt}")
     chosen = wanted if wanted is not None else [p for p in PARTS if p not in why]
     refused = [p for p in chosen if p in why]
     if refused:
@@ -177,7 +179,7 @@ def plan_transfer(resolved: dict[str, Any], source: str | Path,
         if src_mode != dst_mode:
             raise TransferError(
                 f"--init-from {src_dir}: observation modes differ: the source run observes {src_mode!r}, this one "
-                f"{dst_mode!r}; set --set env.obs_mode={src_mode} (or --transfer critic)")
+                f"{dst_mode!r}; set --set env.obs_mode={src_mode}, or {alt}")
         if src_obs != dst_obs:
             hint = (" or observe egocentrically in both runs (--set env.obs_mode=egocentric: its shape depends on "
                     "the sub-goal catalogue only, not on the grid)"
@@ -185,25 +187,27 @@ def plan_transfer(resolved: dict[str, Any], source: str | Path,
             raise TransferError(
                 f"--init-from {src_dir}: observation shapes differ: {src['task']} has {src_obs}, {resolved['task']} "
                 f"has {dst_obs}; the high and low levels read observations, so they transfer only between "
-                f"tasks with the same observation shape (the critic alone transfers: --transfer critic){hint}")
+                f"tasks with the same observation shape; {alt}{hint}")
         if src_mode in _CELL_MODES and src_size != dst_size:
             # the same length, but each entry names another cell: a 13x11 grid against an 11x13 one
             raise TransferError(
                 f"--init-from {src_dir}: the grids differ in size: {src['task']} is {src_size[0]}x{src_size[1]}, "
                 f"{resolved['task']} {dst_size[0]}x{dst_size[1]}; the {src_mode} observation names absolute cells, so a "
-                f"network trained on one grid would misread the other; transfer the critic alone (--transfer critic) "
+                f"network trained on one grid would misread the other; {alt} "
                 f"or observe egocentrically in both runs (--set env.obs_mode=egocentric)")
         if (src_mode in _CELL_MODES and src["family"] == resolved["family"] == "minigrid"
                 and src["task_ref"] != resolved["task_ref"]):
             print(f"hubsgo: note: --init-from {src_dir}: both runs observe {src_mode!r}, which names absolute cells, "
                   f"so networks trained on {src['task']} read {resolved['task']}'s cells as {src['task']}'s; where "
                   "the two layouts differ, observe egocentrically in both runs (--set env.obs_mode=egocentric), or "
-                  "transfer the critic alone (--transfer critic)", file=sys.stderr)
+                  f"{alt}", file=sys.stderr)
         if src_mode == "egocentric":
-            _note_other_landmarks(src_dir, src, resolved)
+            _note_other_landmarks(src_dir, src, resolved, alt)
         if "low" in chosen and src_n != dst_n:
+            rest = ",".join(p for p in chosen if p != "low")
             raise TransferError(f"--init-from {src_dir}: action counts differ: {src['task']} has {src_n} actions, "
-                                f"{resolved['task']} {dst_n}; leave out the low level (--transfer critic,high)")
+                                f"{resolved['task']} {dst_n}; leave out the low level"
+                                + (f" (--transfer {rest})" if rest else ""))
         for part in ("high", "low"):
             a = list(src["hyper"].get(part, {}).get("hidden", []))
             b = list(resolved["hyper"].get(part, {}).get("hidden", []))

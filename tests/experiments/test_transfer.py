@@ -96,6 +96,12 @@ def test_observations_of_another_shape_are_refused_in_one_line(sources, tmp_path
     assert err[0].endswith("or observe egocentrically in both runs (--set env.obs_mode=egocentric: its shape "
                            "depends on the sub-goal catalogue only, not on the grid)"), err[0]
     assert not out.exists(), "a refused transfer writes nothing"
+    # an h-DQN run has no critic: the way out is no --init-from, not the critic alone
+    assert main(["train", "twowall", "--agent", "hdqn", "--init-from", str(sources["keydoor"]), "--out", str(out),
+                 "--steps", "300", "--no-progress", *CLI_TINY]) == 2
+    err = capsys.readouterr().err
+    assert "same observation shape; train without --init-from (no critic to transfer: the runs are hubsgo and hdqn)" \
+        in err and "--transfer critic" not in err, err
     for argv, needle in ((["--transfer", "brain"], "--transfer brain: use some of critic, high, low"),
                          (["--agent", "hdqn", "--transfer", "critic"], "cannot transfer the critic")):
         assert main(["train", "keydoor_moved", "--init-from", str(sources["keydoor"]), "--out", str(out),
@@ -209,8 +215,8 @@ def test_other_observation_modes_are_refused_in_one_line(sources, tmp_path, caps
                  "--no-progress", "--set", "env.obs_mode=egocentric", *CLI_TINY]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["hubsgo: error: --init-from " + str(sources["keydoor"]) + ": observation modes differ: the source "
-                   "run observes 'symbolic', this one 'egocentric'; set --set env.obs_mode=symbolic (or --transfer "
-                   "critic)"]
+                   "run observes 'symbolic', this one 'egocentric'; set --set env.obs_mode=symbolic, or transfer "
+                   "the critic alone (--transfer critic)"]
     assert not out.exists()
     assert main(["train", "keydoor_moved", "--restart-schedules", "--out", str(out), "--no-progress"]) == 2
     assert "add --init-from RUN" in capsys.readouterr().err
@@ -269,7 +275,7 @@ def test_a_transfer_between_families_names_the_critic_instead_of_an_obs_mode_the
     base = ["train", "push_any_one", "--init-from", str(src), "--steps", "300", "--no-progress"]
     assert main([*base, "--out", str(tmp_path / "arm")]) == 2
     line = _one_error_line(capsys)
-    assert "only the critic can transfer; pass --transfer critic" in line and "obs_mode" not in line, line
+    assert "only a critic could transfer; transfer the critic alone (--transfer critic)" in line and "obs_mode" not in line, line
     assert main([*base, "--transfer", "critic,high", "--out", str(tmp_path / "arm2")]) == 2
     line = _one_error_line(capsys)
     assert "cannot transfer the high" in line and "obs_mode" not in line, line
