@@ -72,10 +72,14 @@ def _table_ok(value: Any) -> bool:
             and all(isinstance(v, (int, float)) and not isinstance(v, bool) and v > 0 for v in value))
 
 
-def _robot_ok(value: Any) -> bool:
-    from robosuite.robots import ROBOT_CLASS_MAPPING
+#: the robosuite robots a scene takes: one fixed-base arm whose action is (dx, dy, dz, gripper) and whose
+#: gripper has the two finger pads the grasp predicate reads (a two-arm, mobile, legged or dexterous-hand
+#: robot has a longer action or other grippers)
+ROBOTS = ("Panda", "Sawyer", "UR5e", "IIWA", "Jaco", "Kinova3")
 
-    return isinstance(value, str) and value in ROBOT_CLASS_MAPPING
+
+def _robot_ok(value: Any) -> bool:
+    return isinstance(value, str) and value in ROBOTS
 
 
 def _seed_ok(value: Any) -> bool:
@@ -86,7 +90,7 @@ def _seed_ok(value: Any) -> bool:
 SCENE_OPTIONS: dict[str, tuple[Callable[[Any], bool], str]] = {
     "initialization_noise": (_noise_ok, "null, default or {magnitude: a number >= 0, type: gaussian or uniform}"),
     "table_full_size": (_table_ok, "three positive numbers of metres (length, width, thickness)"),
-    "robots": (_robot_ok, "a robosuite robot name, e.g. Panda"),
+    "robots": (_robot_ok, f"one of the single arms: {', '.join(ROBOTS)}"),
     "seed": (_seed_ok, "a whole number, 0 or more"),
     "placement_initializer": (lambda value: value is None, "set from Python (a robosuite sampler), not in a catalogue"),
 }
