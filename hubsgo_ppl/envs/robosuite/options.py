@@ -53,6 +53,14 @@ def positive_options(catalogue: Any, options: dict[str, Any]) -> None:
         if not number or not value > 0 or (whole and value != int(value)):
             raise SpecError(f"{getattr(catalogue, 'source', 'catalogue')}: options.{key}: {value!r} is not a "
                             f"positive {'whole ' if whole else ''}number of {unit}")
+    if "control_freq" in options:
+        from robosuite.macros import SIMULATION_TIMESTEP
+
+        most = round(1 / SIMULATION_TIMESTEP)   # faster, a control step runs no simulation step: nothing moves
+        if options["control_freq"] > most:
+            raise SpecError(f"{getattr(catalogue, 'source', 'catalogue')}: options.control_freq: "
+                            f"{options['control_freq']!r} is faster than the simulation's {most} steps per second; "
+                            f"give 1 to {most}")
 
 
 def _noise_ok(value: Any) -> bool:

@@ -148,7 +148,7 @@ def test_tasks_and_check_env_refuse_the_same_arm_catalogues(tmp_path, catalogue,
                                         ("table_full_size", "[1, 2]"), ("table_full_size", "big"),
                                         ("robots", "Foo"), ("robots", "Baxter"), ("robots", "GR1"),
                                         ("robots", "PandaOmron"), ("robots", "XArm7"), ("seed", "abc"),
-                                        ("placement_initializer", "3")])
+                                        ("placement_initializer", "3"), ("control_freq", "1000")])
 def test_a_scene_option_robosuite_would_fail_on_is_one_line_naming_the_file_and_key(tmp_path, catalogue, capsys,
                                                                                      key, value):
     import yaml
