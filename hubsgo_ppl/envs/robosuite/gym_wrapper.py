@@ -110,9 +110,12 @@ def make_robosuite_task(catalogue: str | Path | Catalogue, **kwargs: Any) -> Rob
     if cat.family != "robosuite":
         raise SpecError(f"{cat.source}: family: {cat.family!r} is not a robosuite task; "
                         f"use hubsgo_ppl.envs.make() for it")
-    positive_options(cat, cat.options)
-    scene_options(cat, cat.options)
     options = {**cat.options, **kwargs}
+    # an override (``--set env.KEY=...``) is checked as the catalogue's own option is; a sampler passed
+    # from Python is the one value a catalogue cannot hold
+    checked = {k: v for k, v in options.items() if not (k == "placement_initializer" and k in kwargs)}
+    positive_options(cat, checked)
+    scene_options(cat, checked)
     env_class = options.pop("env_class", None)
     if env_class not in TASK_CLASSES:
         raise SpecError(f"{cat.source}: options.env_class: {env_class!r} is not a robosuite task; "

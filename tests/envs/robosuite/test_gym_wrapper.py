@@ -162,3 +162,17 @@ def test_a_scene_option_robosuite_would_fail_on_is_one_line_naming_the_file_and_
     assert main(["tasks", str(path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"bad.yaml: options.{key}: " in err[0], err
+
+
+@pytest.mark.parametrize("key, value", [("robots", "Baxter"), ("control_freq", 1000), ("table_full_size", [1, 2])])
+def test_an_override_of_a_scene_option_is_checked_as_the_catalogues_own(catalogue, key, value):
+    with pytest.raises(SpecError, match=f"push_any_one.yaml: options.{key}: "):
+        make_robosuite_task(catalogue("push_any_one"), **{key: value})
+
+
+def test_set_env_robots_is_refused_in_one_line(tmp_path, capsys):
+    from hubsgo_ppl.cli import main
+
+    code = main(["train", "push_any_one", "--steps", "10", "--set", "env.robots=Baxter", "--out", str(tmp_path / "r")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "options.robots: 'Baxter' is not one of the single arms" in err[0], err
