@@ -121,6 +121,10 @@ def run_dir_checkpoint(run_dir: Path) -> dict[str, Any]:
     if not run_dir.is_dir():
         raise RunError(f"{run_dir}: no such run directory; pass the --out folder of `hubsgo train`")
     if not (run_dir / CHECKPOINT).is_file():
+        seeds = sorted(p.parent.name for p in run_dir.glob(f"seed*/{CHECKPOINT}"))
+        if seeds:   # the --out folder of `hubsgo train --seeds`: one run per seed below it
+            raise RunError(f"{run_dir}: holds one run per seed of `hubsgo train --seeds` ({', '.join(seeds)}); "
+                           f"pass one of them, e.g. {run_dir / seeds[0]}")
         raise RunError(f"{run_dir}: not a run directory (no {CHECKPOINT}); pass the --out folder of `hubsgo train`, "
                        "after its first checkpoint")
     return read_checkpoint(run_dir / CHECKPOINT)

@@ -59,3 +59,14 @@ def test_a_checkpoint_with_a_damaged_config_is_one_line_in_every_command(tmp_pat
         assert len(err) == 1 and "damaged: hyper is the str 'not a mapping'" in err[0], (command, err)
     assert not (out / "config.yaml").exists() and load_checkpoint(out / "checkpoint.pt")["config"]["hyper"] == \
         "not a mapping", "nothing rewritten"
+
+
+@pytest.mark.parametrize("verb", ["subgoals", "evaluate", "review"])
+def test_the_out_folder_of_a_seeds_run_names_its_seed_runs(tmp_path, capsys, verb):
+    for seed in (0, 1):   # what `hubsgo train --seeds 0 1 --out OUT` leaves: OUT/seed0, OUT/seed1
+        (tmp_path / f"seed{seed}").mkdir()
+        (tmp_path / f"seed{seed}" / "checkpoint.pt").write_bytes(b"")
+    assert main([verb, str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "holds one run per seed of `hubsgo train --seeds` (seed0, seed1)" in err[0], err
+    assert f"e.g. {tmp_path / 'seed0'}" in err[0]
