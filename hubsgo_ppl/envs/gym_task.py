@@ -198,7 +198,10 @@ def _build(options: GymOptions, source: str, kwargs: dict[str, Any]) -> gym.Env:
     if options.gym_id is not None:
         limit = {} if options.max_episode_steps is None else {"max_episode_steps": options.max_episode_steps}
         try:
-            spec = gym.spec(options.gym_id)
+            module, _, env_id = options.gym_id.rpartition(":")      # "my_pkg:MyEnv-v0": my_pkg registers it
+            if module:
+                importlib.import_module(module)
+            spec = gym.spec(env_id)
             if kwargs and isinstance(spec.entry_point, str):
                 creator = gym.envs.registration.load_env_creator(spec.entry_point)
                 own = {k: v for k, v in kwargs.items() if k not in inspect.signature(gym.make).parameters}

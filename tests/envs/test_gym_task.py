@@ -241,3 +241,19 @@ def test_an_env_without_a_time_limit_is_warned_of_once(tmp_path, corridor, capsy
     GymTask(path).close()
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "has no time limit" in err[0] and "options.max_episode_steps" in err[0], err
+
+
+def test_a_registered_id_named_with_its_module_is_built_after_importing_it(tmp_path, corridor, monkeypatch):
+    (tmp_path / "registers_corridor.py").write_text(
+        "import gymnasium as gym\n"
+        "gym.register('RegisteredCorridor-v0', entry_point='corridor_env:make_corridor', max_episode_steps=30)\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delitem(gym.registry, "RegisteredCorridor-v0", raising=False)
+    path = _catalogue(tmp_path, SUBGOALS[:1] + SUBGOALS[2:], gym_id="registers_corridor:RegisteredCorridor-v0")
+    task = GymTask(path)
+    try:
+        assert task.subgoal_names == ["switch_a", "goal"]
+    finally:
+        task.close()
+        gym.registry.pop("RegisteredCorridor-v0", None)
+        sys.modules.pop("registers_corridor", None)
