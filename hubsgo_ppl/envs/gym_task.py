@@ -35,6 +35,7 @@ import importlib
 import inspect
 import itertools
 import sys
+import traceback
 from pathlib import Path
 from typing import Any, Callable, ClassVar
 
@@ -158,7 +159,18 @@ def _test(sg: SubgoalDef, source: str) -> Callable[[Any, Any, dict, bool], bool]
     fn = load_callable(sg.args["fn"], f"{where}: args.fn")
     rest = {k: v for k, v in sg.args.items() if k != "fn"}
     _check_call(fn, rest, f"{where}: args.fn {sg.args['fn']!r}")
-    return lambda env, obs, info, success: _truth(fn(env, obs, info, **rest), f"{where}: args.fn {sg.args['fn']!r}")
+    ref = f"{where}: args.fn {sg.args['fn']!r}"
+
+    def test(env: Any, obs: Any, info: dict, success: bool) -> bool:
+        try:
+            value = fn(env, obs, info, **rest)
+        except Exception as exc:        # the user's code: the sub-goal, the error and where it was raised
+            frame = traceback.extract_tb(exc.__traceback__)[-1]
+            raise SpecError(f"{ref} raised {type(exc).__name__}: {' '.join(str(exc).split())[:200]} (in "
+                            f"{Path(frame.filename).name}, line {frame.lineno}); a predicate must give a truth "
+                            "value in every state the env reaches") from exc
+        return _truth(value, ref)
+    return test
 
 
 def _bind_error(fn: Callable[..., Any], *args: Any, **kwargs: Any) -> TypeError | None:

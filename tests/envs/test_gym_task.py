@@ -198,11 +198,17 @@ def _several(env, obs, info):
     return np.array([True, False])
 
 
+def _raises(env, obs, info):
+    return info["no_such_key"]
+
+
 @pytest.mark.parametrize("subgoal, fragment", [
     ({"kind": "predicate", "args": {"fn": f"{__name__}:_two_args"}}, "cannot be called as fn(env, obs, info)"),
     ({"kind": "predicate", "args": {"fn": "corridor_env:switch_on", "whch": "a"}},
      "cannot be called as fn(env, obs, info, whch=...)"),
     ({"kind": "predicate", "args": {"fn": f"{__name__}:_several"}}, "gave an array of 2 elements"),
+    ({"kind": "predicate", "args": {"fn": f"{__name__}:_raises"}},
+     "raised KeyError: 'no_such_key' (in test_gym_task.py, line"),
     ({"kind": "info", "args": {"key": "action_mask"}}, "info['action_mask'] gave an array of 6 elements"),
 ])
 def test_a_predicate_of_another_signature_or_an_array_is_one_line_exit_2(tmp_path, corridor, capsys, subgoal,
