@@ -310,3 +310,19 @@ def test_a_route_door_past_the_doors_of_every_seeded_layout_is_warned_of(tmp_pat
     RegisteredEnv(str(path)).close()
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "(door_2)" in err[0] and "number 2 on the way to the goal" in err[0], err
+
+
+def test_an_at_cell_that_is_a_wall_in_every_seeded_layout_is_warned_of(tmp_path, capsys):
+    path = tmp_path / "shift.yaml"
+    path.write_text(textwrap.dedent("""\
+        task: shift
+        family: minigrid
+        options: {gym_id: MiniGrid-DistShift1-v0, actions: [left, right, forward]}
+        subgoals:
+          - {name: border, kind: at, args: {cell: [1, 6]}}
+          - {name: floor, kind: at, args: {cell: [1, 5]}}
+          - {name: goal, kind: goal}
+        """))
+    RegisteredEnv(str(path)).close()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "(border).args.cell: [1, 6] is a wall in all 8 seeded layouts" in err[0], err

@@ -14,7 +14,9 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["goal_reachable", "missing_for_goal"]
+from ...specs import SpecError
+
+__all__ = ["goal_reachable", "missing_for_goal", "at_cells"]
 
 
 def goal_reachable(env: Any, actions: list[str] | set[str]) -> bool | None:
@@ -78,3 +80,23 @@ def missing_for_goal(env: Any, actions: list[str]) -> list[str]:
         if goal_reachable(env, [*actions, *extra]):
             return extra
     return []
+
+
+def at_cells(subgoals: list[Any], width: int, height: int, gym_id: str, source: str) -> list[tuple[int, Any]]:
+    """The ``at {cell}`` sub-goals as ``(i, (x, y))``; a :class:`SpecError` for a cell outside the grid."""
+    found = []
+    for i, sg in enumerate(subgoals):
+        if sg.kind == "at" and "cell" in sg.args:
+            x, y = sg.args["cell"]
+            if not (0 <= x < width and 0 <= y < height):
+                raise SpecError(f"{source}: subgoals[{i}] ({sg.name}).args.cell: [{x}, {y}] is outside "
+                                f"{gym_id}'s {width}x{height} grid; x counts from 0 to {width - 1}, y from 0 to "
+                                f"{height - 1}")
+            found.append((i, (x, y)))
+    return found
+
+
+def is_wall(env: Any, cell: tuple[int, int]) -> bool:
+    """Whether ``cell`` of ``env``'s current layout holds a wall."""
+    obj = env.grid.get(*cell)
+    return obj is not None and obj.type == "wall"

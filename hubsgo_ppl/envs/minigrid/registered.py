@@ -51,7 +51,7 @@ from ...specs import SpecError, StrictModel, format_validation_error
 from ..subgoals import Catalogue, load_catalogue
 from . import egocentric, image
 from .kinds import KINDS, Kind, Scene, mission_named, compile_kind, new_scene
-from .reach import goal_reachable, missing_for_goal
+from .reach import at_cells, goal_reachable, is_wall, missing_for_goal
 
 __all__ = ["RegisteredOptions", "RegisteredEnv", "is_registered", "make_minigrid"]
 
@@ -115,15 +115,15 @@ def _quiet_reset(env: Any, seed: int | None, options: dict[str, Any] | None = No
 
 
 def _probe(gym_id: str, source: str, kwargs: dict[str, Any], kinds: tuple[Kind, ...], actions: list[str],
-           goal_pays: bool) -> list[str] | None:
+           goal_pays: bool, cells: list[tuple[int, Any]] = ()) -> list[str] | None:
     """Refuse, in one line, an env that cannot generate a layout, and a sub-goal whose type of object is in
     none of ``PROBE_RESETS`` seeded layouts (on the floor, in a box or carried at reset); warn, once, where
     the type is there but never in the colour (or lock) the sub-goal names, as environments that draw
-    colours at random may have it in other layouts. Resets an env of its own: the caller's is untouched.
+    colours at random may have it in other layouts, and where an ``at`` cell (``cells``) is a wall in all.
 
     Where the goal square pays (``goal_pays``) and ``actions`` reach it (:mod:`.reach`) in none of the
     layouts that have one (DoorKey without ``toggle``), returns what :func:`_check_actions` refuses: the
-    actions that would reach it (empty where none would); else None."""
+    actions that would reach it (empty where none would); else None. The caller's env is untouched."""
     wanted = [(i, k, what, match) for i, k in enumerate(kinds) for what, match in k.selects]
     env, seen = _inner(gym_id, source, **kwargs), set()
     # what the first layout whose goal square is out of reach would need; None while there is none
@@ -142,7 +142,8 @@ def _probe(gym_id: str, source: str, kwargs: dict[str, Any], kinds: tuple[Kind, 
                     missing = missing_for_goal(env, actions)
                 elif reached or missing is None:
                     goal_pays = False       # settled: a goal square in reach, or layouts without one
-            if not wanted and not goal_pays:
+            cells = [(i, c) for i, c in cells if is_wall(env, c)]     # those a wall in every layout so far
+            if not wanted and not goal_pays and not cells:
                 return None
             s = new_scene(env.grid, tuple(env.agent_pos), env.carrying)
             objs = [o for o, _ in s.objects] + [o.contains for o, _ in s.objects
@@ -153,6 +154,9 @@ def _probe(gym_id: str, source: str, kwargs: dict[str, Any], kinds: tuple[Kind, 
     finally:
         env.close()
     blocked = missing if goal_pays else None
+    for i, c in cells:
+        _warn(f"{source}: subgoals[{i}] ({kinds[i].name}).args.cell: {list(c)} is a wall in all {PROBE_RESETS} "
+              f"seeded layouts of {gym_id}, so the agent cannot stand on it there; pick a floor cell")
     if not wanted:
         return blocked
     types = {entry.split()[-1] for entry in seen}
@@ -163,9 +167,7 @@ def _probe(gym_id: str, source: str, kwargs: dict[str, Any], kinds: tuple[Kind, 
         named = what.split(" (")[0].split()[-1]
         if named in types or (named == "object" and types):
             # the type is there, only its colour or lock differs: layouts drawn at random may still have it
-            if line not in _WARNED:
-                _WARNED.add(line)
-                print(f"hubsgo: warning: {line}; it holds only in layouts that have one", file=sys.stderr)
+            _warn(f"{line}; it holds only in layouts that have one")
             continue
         raise SpecError(f"{line}; change its args or drop it")
     return blocked
@@ -173,6 +175,12 @@ def _probe(gym_id: str, source: str, kwargs: dict[str, Any], kinds: tuple[Kind, 
 
 #: the probe's warnings already printed in this process (an env is built for each run, evaluation, seed)
 _WARNED: set[str] = set()
+
+
+def _warn(line: str) -> None:
+    if line not in _WARNED:
+        _WARNED.add(line)
+        print(f"hubsgo: warning: {line}", file=sys.stderr)
 
 #: the MiniGrid actions a sub-goal kind cannot hold without (``forward`` is needed by every environment)
 NEEDS: dict[str, tuple[str, ...]] = {"carrying": ("pickup",), "cleared": ("pickup",), "door_open": ("toggle",),
@@ -266,18 +274,14 @@ class RegisteredEnv(gym.Env):
             compile_kind(i, sg, source) for i, sg in enumerate(marks))
         self._mark_cols = np.array([[sg.name for sg in marks].index(n) for n in self.subgoal_names], np.int64)
         paid = rewarded_actions(type(self.inner))     # actions the env's own step pays on (none: the goal square)
+        W, H = self.inner.width, self.inner.height
+        cells = at_cells(cat.subgoals, W, H, opts.gym_id, source)       # refuses a cell outside the grid
         blocked = _probe(opts.gym_id, source, {"max_steps": steps} if steps else {}, self._kinds, opts.actions,
-                         goal_pays=not paid)
+                         goal_pays=not paid, cells=cells)
         _check_actions(paid, opts.actions, self._kinds, opts.gym_id, source, blocked)
         self._action_map = tuple(Actions[a] for a in opts.actions)
         self.action_names = list(opts.actions)
         self.action_space = spaces.Discrete(len(self._action_map))
-        W, H = self.inner.width, self.inner.height
-        for i, sg in enumerate(cat.subgoals):
-            x, y = sg.args.get("cell", (0, 0)) if sg.kind == "at" else (0, 0)
-            if not (0 <= x < W and 0 <= y < H):
-                raise SpecError(f"{source}: subgoals[{i}] ({sg.name}).args.cell: [{x}, {y}] is outside "
-                                f"{opts.gym_id}'s {W}x{H} grid; x counts from 0 to {W - 1}, y from 0 to {H - 1}")
         if self.obs_mode == "egocentric":
             self.observation_space = spaces.Box(-1.0, 1.0, (egocentric.dim(len(marks)),), np.float32)
         else:
