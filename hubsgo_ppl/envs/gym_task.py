@@ -305,7 +305,9 @@ class GymTask(gym.Env):
             print(f"hubsgo: warning: {source}: the env has no time limit, so an episode lasts until the env ends it "
                   "and a run can pass its step budget, or never end; set options.max_episode_steps "
                   "(train_env's max_episode_steps)", file=sys.stderr)
-        self.action_space = self.env.action_space
+        # the agents number actions from 0: a Discrete(n, start=k) env gets action + k
+        self._action_start = int(self.env.action_space.start)
+        self.action_space = gym.spaces.Discrete(int(self.env.action_space.n))
         self.metadata = dict(getattr(self.env, "metadata", {}) or {})
         self.render_mode = getattr(self.env, "render_mode", None)
         self.subgoal_names: list[str] = cat.names
@@ -336,7 +338,8 @@ class GymTask(gym.Env):
         return self._obs(obs), self._info(obs, info, bool(info.get("is_success", False)))
 
     def step(self, action: Any):
-        obs, reward, terminated, truncated, info = self.env.step(action)
+        obs, reward, terminated, truncated, info = self.env.step(action + self._action_start
+                                                                 if self._action_start else action)
         info = dict(info)
         success = is_success(info, reward, terminated)
         return self._obs(obs), reward, terminated, truncated, self._info(obs, info, success)

@@ -263,3 +263,35 @@ def test_a_registered_id_named_with_its_module_is_built_after_importing_it(tmp_p
         task.close()
         gym.registry.pop("RegisteredCorridor-v0", None)
         sys.modules.pop("registers_corridor", None)
+
+
+class _FromOne(gym.Env):
+    """Actions 1 and 2 (Discrete(2, start=1)); the episode ends on action 2, successfully."""
+
+    observation_space = gym.spaces.Box(0.0, 1.0, (1,), np.float32)
+    action_space = gym.spaces.Discrete(2, start=1)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        return np.zeros(1, np.float32), {}
+
+    def step(self, action):
+        assert self.action_space.contains(action), action
+        return np.zeros(1, np.float32), float(action == 2), action == 2, False, {}
+
+
+def _from_one():
+    return _FromOne()
+
+
+def test_an_action_space_that_starts_past_zero_gets_the_actions_it_numbers(tmp_path):
+    path = _catalogue(tmp_path, [{"name": "goal", "kind": "goal"}], entry_point=f"{__name__}:_from_one",
+                      max_episode_steps=5)
+    task = GymTask(path)
+    try:
+        assert task.action_space == gym.spaces.Discrete(2)
+        task.reset(seed=0)
+        assert task.step(0)[2:4] == (False, False)
+        assert task.step(1)[4]["is_success"]
+    finally:
+        task.close()
