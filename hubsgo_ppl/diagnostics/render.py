@@ -40,6 +40,7 @@ import numpy as np
 
 from ..experiments.io import atomic_path
 from ..experiments.run import RunError, read_config_file
+from ..specs import SpecError
 
 __all__ = ["FrameRecorder", "Recording", "check_renderable", "read_run_config", "record_episode",
            "annotate_frames", "write_gif", "render_episode", "episode_summary", "CURRENT_COLOR", "GHAT_COLOR"]
@@ -190,9 +191,12 @@ def _rgb_env(resolved: dict[str, Any]) -> gym.Env:
     kwargs = dict((resolved.get("hyper") or {}).get("env") or {})
     try:
         return make_subset(resolved["task_ref"], resolved.get("subgoals"), render_mode="rgb_array", **kwargs)
-    except TypeError as exc:
+    except (TypeError, SpecError) as exc:     # SpecError: the kwargs check, which names options.kwargs
+        if isinstance(exc, SpecError) and "'render_mode'" not in str(exc):
+            raise
         raise RunError(f"render: the env of task {resolved.get('task')!r} cannot be built with render_mode="
-                       f"'rgb_array' ({' '.join(str(exc).split())[:200]})") from None
+                       "'rgb_array' (its constructor or factory takes no render_mode argument); give it one, "
+                       "and a render() that returns an H x W x 3 uint8 frame") from None
 
 
 def _font(size: int):

@@ -122,3 +122,19 @@ def test_bad_calls_are_refused_before_anything_is_written(tmp_path, examples):
     with pytest.raises(RunError, match="was trained with another task.yaml"):
         train_env(corridor.make_corridor, goals, out, agent="hdqn", steps=100, overrides=TINY, max_episode_steps=9)
     assert (out / "task.yaml").read_text() == kept
+
+
+def _corridor_without_render_mode():
+    import corridor_env
+
+    return corridor_env.make_corridor()
+
+
+def test_render_of_an_env_that_takes_no_render_mode_says_so(tmp_path, examples, capsys):
+    out = tmp_path / "plain"
+    train_env(_corridor_without_render_mode, {"goal": {"kind": "goal"}}, out=out, agent="hdqn", steps=200,
+              max_episode_steps=30, overrides=TINY)
+    capsys.readouterr()
+    assert main(["render", str(out), "--out", str(tmp_path / "ep.gif")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "takes no render_mode argument" in err[0] and "options.kwargs" not in err[0], err
