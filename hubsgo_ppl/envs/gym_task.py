@@ -214,8 +214,9 @@ def _build(options: GymOptions, source: str, kwargs: dict[str, Any]) -> gym.Env:
             if module:
                 importlib.import_module(module)
             spec = gym.spec(env_id)
-            if kwargs and isinstance(spec.entry_point, str):
-                creator = gym.envs.registration.load_env_creator(spec.entry_point)
+            if kwargs and spec.entry_point is not None:      # a "module:Class" string, or the callable itself
+                creator = spec.entry_point if callable(spec.entry_point) else \
+                    gym.envs.registration.load_env_creator(spec.entry_point)
                 own = {k: v for k, v in kwargs.items() if k not in inspect.signature(gym.make).parameters}
                 _check_kwargs(creator, {**spec.kwargs, **own}, source, options.gym_id)
             return gym.make(options.gym_id, **limit, **kwargs)

@@ -295,3 +295,21 @@ def test_an_action_space_that_starts_past_zero_gets_the_actions_it_numbers(tmp_p
         assert task.step(1)[4]["is_success"]
     finally:
         task.close()
+
+
+def _frozen(is_slippery=True):
+    return gym.make("FrozenLake-v1", is_slippery=is_slippery)
+
+
+def test_a_keyword_argument_an_id_registered_with_a_callable_does_not_take_is_one_line_exit_2(tmp_path, capsys):
+    from hubsgo_ppl.cli import main
+
+    gym.register("CallableFrozen-v0", entry_point=_frozen, max_episode_steps=20)
+    try:
+        path = _catalogue(tmp_path, [{"name": "goal", "kind": "goal"}], gym_id="CallableFrozen-v0",
+                          kwargs={"is_slipery": False})
+        assert main(["check-env", str(path)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "options.kwargs" in err[0] and "keyword argument 'is_slipery'" in err[0], err
+    finally:
+        gym.registry.pop("CallableFrozen-v0", None)
