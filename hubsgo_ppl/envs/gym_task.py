@@ -299,7 +299,7 @@ class GymTask(gym.Env):
         except BaseException:
             self.env.close()
             raise
-        self.observation_space = flat or self._space
+        self.observation_space, self._source = flat or self._space, source
         self._flatten = flat is not None
         if not _has_time_limit(self.env) and source not in _NO_LIMIT_WARNED:
             _NO_LIMIT_WARNED.add(source)
@@ -323,9 +323,11 @@ class GymTask(gym.Env):
         return {name: key for name, key in self._info_keys.items() if key not in self._seen_keys}
 
     def _obs(self, obs: Any) -> np.ndarray:
-        if self._flatten:
-            return np.asarray(gym.spaces.flatten(self._space, obs), dtype=np.float32)
-        return np.asarray(obs, dtype=np.float32)
+        flat = np.asarray(gym.spaces.flatten(self._space, obs) if self._flatten else obs, dtype=np.float32)
+        if flat.shape != self.observation_space.shape:
+            raise SpecError(f"{self._source}: the env returned an observation of shape {np.shape(obs)}, which its "
+                            f"observation_space {self._space} does not hold; make the two agree")
+        return flat
 
     def _info(self, obs: Any, info: dict[str, Any], success: bool) -> dict[str, Any]:
         task = self.env.unwrapped

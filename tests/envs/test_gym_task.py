@@ -313,3 +313,27 @@ def test_a_keyword_argument_an_id_registered_with_a_callable_does_not_take_is_on
         assert len(err) == 1 and "options.kwargs" in err[0] and "keyword argument 'is_slipery'" in err[0], err
     finally:
         gym.registry.pop("CallableFrozen-v0", None)
+
+
+class _Wider(_FromOne):
+    """Declares a Box of 1 number, returns 3."""
+
+    action_space = gym.spaces.Discrete(2)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        return np.zeros(3, np.float32), {}
+
+
+def _wider():
+    return _Wider()
+
+
+def test_an_observation_its_space_does_not_hold_is_one_line_exit_2(tmp_path, capsys):
+    from hubsgo_ppl.cli import main
+
+    path = _catalogue(tmp_path, [{"name": "goal", "kind": "goal"}], entry_point=f"{__name__}:_wider",
+                      max_episode_steps=5)
+    assert main(["check-env", str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "observation of shape (3,)" in err[0] and "unexpected" not in err[0], err
