@@ -323,10 +323,14 @@ class GymTask(gym.Env):
         return {name: key for name, key in self._info_keys.items() if key not in self._seen_keys}
 
     def _obs(self, obs: Any) -> np.ndarray:
-        flat = np.asarray(gym.spaces.flatten(self._space, obs) if self._flatten else obs, dtype=np.float32)
-        if flat.shape != self.observation_space.shape:
-            raise SpecError(f"{self._source}: the env returned an observation of shape {np.shape(obs)}, which its "
-                            f"observation_space {self._space} does not hold; make the two agree")
+        try:
+            flat = np.asarray(gym.spaces.flatten(self._space, obs) if self._flatten else obs, dtype=np.float32)
+            why = None if flat.shape == self.observation_space.shape else f"of shape {np.shape(obs)}"
+        except (IndexError, ValueError, TypeError, KeyError, AssertionError) as exc:    # flatten's own complaint
+            why = f"{' '.join(str(obs).split())[:80]} ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})"
+        if why is not None:
+            raise SpecError(f"{self._source}: the env returned an observation {why}, which its observation_space "
+                            f"{self._space} does not hold; make the two agree")
         return flat
 
     def _info(self, obs: Any, info: dict[str, Any], success: bool) -> dict[str, Any]:

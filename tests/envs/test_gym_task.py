@@ -337,3 +337,29 @@ def test_an_observation_its_space_does_not_hold_is_one_line_exit_2(tmp_path, cap
     assert main(["check-env", str(path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "observation of shape (3,)" in err[0] and "unexpected" not in err[0], err
+
+
+class _PastDiscrete(_FromOne):
+    """Declares Discrete(4), returns 4."""
+
+    observation_space = gym.spaces.Discrete(4)
+    action_space = gym.spaces.Discrete(2)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        return 4, {}
+
+
+def _past_discrete():
+    return _PastDiscrete()
+
+
+def test_an_observation_flatten_cannot_read_is_one_line_exit_2(tmp_path, capsys):
+    from hubsgo_ppl.cli import main
+
+    path = _catalogue(tmp_path, [{"name": "goal", "kind": "goal"}], entry_point=f"{__name__}:_past_discrete",
+                      max_episode_steps=5)
+    assert main(["check-env", str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "the env returned an observation 4 (IndexError" in err[0], err
+    assert "Discrete(4) does not hold" in err[0] and "unexpected" not in err[0], err
