@@ -220,7 +220,10 @@ def _build(options: GymOptions, source: str, kwargs: dict[str, Any]) -> gym.Env:
                 own = {k: v for k, v in kwargs.items() if k not in inspect.signature(gym.make).parameters}
                 _check_kwargs(creator, {**spec.kwargs, **own}, source, options.gym_id)
             return gym.make(options.gym_id, **limit, **kwargs)
-        except (gym.error.Error, ModuleNotFoundError) as exc:
+        except ModuleNotFoundError as exc:
+            raise SpecError(f"{source}: options.gym_id: cannot import {exc.name!r} for {options.gym_id!r}; "
+                            "install its package or add its folder to PYTHONPATH") from None
+        except gym.error.Error as exc:
             raise SpecError(f"{source}: options.gym_id: {' '.join(str(exc).split())[:300]}") from None
     factory = load_callable(options.entry_point, f"{source}: options.entry_point")
     _check_kwargs(factory, kwargs, source, options.entry_point)

@@ -95,6 +95,8 @@ def test_a_registered_id_with_a_structured_observation_is_flattened(tmp_path):
     ([{"name": "g", "kind": "predicate", "args": {"fn": "corridor_env"}}], None, "is not 'module:function'"),
     ([{"name": "g", "kind": "goal"}], {"gym_id": "Pendulum-v1"}, "family gym trains on a Discrete action space"),
     ([{"name": "g", "kind": "goal"}], {"gym_id": "NoSuchEnv-v0"}, "options.gym_id: Environment `NoSuchEnv`"),
+    ([{"name": "g", "kind": "goal"}], {"gym_id": "no_such_pkg:X-v0"},
+     "cannot import 'no_such_pkg' for 'no_such_pkg:X-v0'; install its package or add its folder to PYTHONPATH"),
     ([{"name": "g", "kind": "goal"}], {"max_episode_steps": 5}, "give exactly one of entry_point"),
     ([{"name": "g", "kind": "goal"}], {"gym_id": "CartPole-v1", "horizon": 5}, "horizon"),
 ])
