@@ -176,7 +176,7 @@ class CriticReadout:
         probs = counts[order].double() / num_samples
         exact = None
         if self.n <= EXACT_LIMIT:
-            exact = self.distribution(exact_max_n=EXACT_LIMIT).log_prob(configs[order]).exp().tolist()
+            exact = self._exact_distribution().log_prob(configs[order].double()).exp().tolist()
         top = float(probs[0])
 
         def close(p: float) -> bool:
@@ -204,7 +204,7 @@ class CriticReadout:
         drew (no extra sampling, so a diagnostic read costs nothing next to an update; standard error
         at most 0.5 / sqrt(S)). Before any update, the mean of :data:`MARGINAL_CHAINS` independent draws."""
         if self.n <= self.config.exact_max_n:
-            return self.distribution(exact_max_n=EXACT_LIMIT).marginals()
+            return self._exact_distribution().marginals().float()
         if self._last_samples is not None:
             return self._last_samples.mean(0)
         return self._independent_draws(MARGINAL_CHAINS).mean(0)
@@ -220,4 +220,14 @@ class CriticReadout:
 
     def log_q(self, w: torch.Tensor) -> torch.Tensor:
         """log q(w; lambda): normalised for N <= 20, else unnormalised (lacks -log Z)."""
-        return self.distribution(exact_max_n=min(self.n, EXACT_LIMIT)).log_prob(torch.as_tensor(w, dtype=torch.float32))
+        if self.n > EXACT_LIMIT:
+            return self.distribution(exact_max_n=0).log_prob(torch.as_tensor(w, dtype=torch.float32))
+        return self._exact_distribution().log_prob(torch.as_tensor(w, dtype=torch.float64)).float()
+
+    def _exact_distribution(self) -> PairwiseMRF:
+        """q enumerated in float64: a state's log-weight is a sum of factors that may be large (an Ising
+        strength of 1e7, say), and in float32 the small differences between the states' weights would be
+        lost, so that their probabilities no longer sum to 1."""
+        return PairwiseMRF(self._theta.detach().double(), self._coupling.detach().double(), self._edge_index,
+                           burn_in=self.config.burn_in, kernel=self.config.kernel, generator=self._generator,
+                           exact_max_n=EXACT_LIMIT)
