@@ -50,7 +50,11 @@ def check_likelihood(likelihood: "Likelihood", n: int) -> None:
         raise ValueError(f"likelihood {name!r}: evidence is {likelihood.evidence!r}; use one of: {', '.join(EVIDENCE)}")
     if likelihood.evidence == "outcomes":
         masks = torch.stack([torch.zeros(n), torch.ones(n)])
-        ll = likelihood.log_likelihood(masks, torch.ones(1, n))
+        try:
+            ll = likelihood.log_likelihood(masks, torch.ones(1, n))
+        except Exception as exc:     # a user's own class that fails: one line naming it, not a traceback
+            raise ValueError(f"likelihood {name!r}: log_likelihood(masks (2, {n}), outcomes (1, {n})) raised "
+                             f"{type(exc).__name__}: {exc}") from None
         if not isinstance(ll, torch.Tensor) or tuple(ll.shape) != (2,) or not bool(torch.isfinite(ll).all()):
             got = tuple(ll.shape) if isinstance(ll, torch.Tensor) else type(ll).__name__
             raise ValueError(f"likelihood {name!r}: log_likelihood(masks (2, {n}), outcomes (1, {n})) gave {got}, not "
@@ -62,6 +66,8 @@ def check_likelihood(likelihood: "Likelihood", n: int) -> None:
     except NotImplementedError:
         raise ValueError(f"likelihood {name!r} defines no distribution(loc); return a Pyro distribution of the "
                          "residuals with loc's shape as its batch shape") from None
+    except Exception as exc:
+        raise ValueError(f"likelihood {name!r}: distribution(loc) raised {type(exc).__name__}: {exc}") from None
     if not isinstance(d, torch.distributions.Distribution):
         raise ValueError(f"likelihood {name!r}: distribution(loc) returned a {type(d).__name__}, not a Pyro "
                          "distribution")
@@ -69,7 +75,10 @@ def check_likelihood(likelihood: "Likelihood", n: int) -> None:
         raise ValueError(f"likelihood {name!r}: distribution(loc) for loc of shape {tuple(loc.shape)} has batch "
                          f"shape {tuple(d.batch_shape)} and event shape {tuple(d.event_shape)}; it needs loc's "
                          "shape as its batch shape and no event shape, one density per residual")
-    lp = d.log_prob(torch.zeros(loc.shape))
+    try:
+        lp = d.log_prob(torch.zeros(loc.shape))
+    except Exception as exc:
+        raise ValueError(f"likelihood {name!r}: log_prob(0) raised {type(exc).__name__}: {exc}") from None
     if not bool(torch.isfinite(lp).all()):
         raise ValueError(f"likelihood {name!r}: log_prob(0) of residuals {loc.flatten().tolist()} is not finite "
                          f"({lp.flatten().tolist()}); the critic needs a finite density for every residual")

@@ -45,13 +45,19 @@ def check_prior(prior: "Prior") -> None:
     except NotImplementedError:
         raise ValueError(f"prior {name!r} defines no distribution(); return a Pyro distribution over the "
                          f"{n} indicators, event shape ({n},)") from None
+    except Exception as exc:     # a user's own class that fails: one line naming it, not a traceback
+        raise ValueError(f"prior {name!r}: distribution() raised {type(exc).__name__}: {exc}") from None
     if not isinstance(d, torch.distributions.Distribution):
         raise ValueError(f"prior {name!r}: distribution() returned a {type(d).__name__}, not a Pyro distribution")
     if tuple(d.batch_shape) != () or tuple(d.event_shape) != (n,):
         raise ValueError(f"prior {name!r}: distribution() has batch shape {tuple(d.batch_shape)} and event shape "
                          f"{tuple(d.event_shape)}; it needs event shape ({n},), one indicator per sub-goal, and no "
                          "batch shape (e.g. dist.Bernoulli(...).to_event(1))")
-    lp = d.log_prob(torch.stack([torch.zeros(n), torch.ones(n)]))
+    try:
+        lp = d.log_prob(torch.stack([torch.zeros(n), torch.ones(n)]))
+    except Exception as exc:
+        raise ValueError(f"prior {name!r}: log_prob of the empty and the full set raised {type(exc).__name__}: "
+                         f"{exc}") from None
     if tuple(lp.shape) != (2,) or not bool(torch.isfinite(lp).all()):
         raise ValueError(f"prior {name!r}: log_prob of the empty and the full set is {lp.tolist()}, not two finite "
                          "numbers; every set of sub-goals needs a finite log p(w)")

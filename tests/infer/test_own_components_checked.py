@@ -40,6 +40,18 @@ class Tailed(Prior):
         return dist.Bernoulli(logits=torch.full((self.graph.n,), -1.0)).to_event(1)
 
 
+class RaisingPrior(Prior):
+    def distribution(self):
+        raise RuntimeError("cannot build")
+
+
+class RaisingLogProb(Prior):
+    def distribution(self):
+        d = dist.Bernoulli(logits=torch.zeros(self.graph.n)).to_event(1)
+        d.log_prob = lambda value: [][0]
+        return d
+
+
 class NoResidualDistribution(Likelihood):
     pass
 
@@ -52,6 +64,18 @@ class SummedResiduals(Likelihood):
 class NaNLikelihood(Likelihood):
     def distribution(self, loc):
         return dist.Normal(loc * float("nan"), 1.0, validate_args=False)
+
+
+class RaisingResiduals(Likelihood):
+    def distribution(self, loc):
+        raise RuntimeError("cannot score")
+
+
+class RaisingOutcomes(Likelihood):
+    evidence = "outcomes"
+
+    def log_likelihood(self, w, outcomes):
+        raise KeyError("episode")
 
 
 class LaplaceTails(Likelihood):
@@ -90,6 +114,10 @@ def test_a_working_pair_loads(tmp_path):
     ("Tailed", "NoResidualDistribution", "likelihood 'own_checked:NoResidualDistribution' defines no distribution"),
     ("Tailed", "SummedResiduals", "has batch shape (2,) and event shape (); it needs loc's shape"),
     ("Tailed", "NaNLikelihood", "log_prob(0) of residuals"),
+    ("RaisingPrior", "LaplaceTails", "distribution() raised RuntimeError: cannot build"),
+    ("RaisingLogProb", "LaplaceTails", "log_prob of the empty and the full set raised IndexError"),
+    ("Tailed", "RaisingResiduals", "distribution(loc) raised RuntimeError: cannot score"),
+    ("Tailed", "RaisingOutcomes", "raised KeyError: 'episode'"),
 ])
 def test_a_broken_distribution_is_refused_when_the_spec_is_read(tmp_path, prior, likelihood, says):
     with pytest.raises(SpecError) as err:
