@@ -25,6 +25,7 @@ MARGINAL_CHAINS = 4096  # fresh chains behind the marginals above exact_max_n be
 # (which continues persistent chains instead of starting from random bits)
 INDEPENDENT_BURN_IN_FACTOR = 4
 NEAR_TIE_STANDARD_ERRORS = 2  # a G* entry this many standard errors from the top one is a near tie
+FLOAT32_EXACT_WEIGHT = 1e4  # above this sum of |factors|, q is enumerated in float64 (float32 spacing ~1e-3 here)
 _MAX_CODE_BITS = 62  # rows up to this width are counted as int64 codes in unique_rows
 
 
@@ -176,7 +177,8 @@ class CriticReadout:
         probs = counts[order].double() / num_samples
         exact = None
         if self.n <= EXACT_LIMIT:
-            exact = self._exact_distribution().log_prob(configs[order].double()).exp().tolist()
+            q = self._exact_distribution()
+            exact = q.log_prob(configs[order].to(q.theta.dtype)).exp().tolist()
         top = float(probs[0])
 
         def close(p: float) -> bool:
@@ -222,12 +224,15 @@ class CriticReadout:
         """log q(w; lambda): normalised for N <= 20, else unnormalised (lacks -log Z)."""
         if self.n > EXACT_LIMIT:
             return self.distribution(exact_max_n=0).log_prob(torch.as_tensor(w, dtype=torch.float32))
-        return self._exact_distribution().log_prob(torch.as_tensor(w, dtype=torch.float64)).float()
+        q = self._exact_distribution()
+        return q.log_prob(torch.as_tensor(w, dtype=q.theta.dtype)).float()
 
     def _exact_distribution(self) -> PairwiseMRF:
-        """q enumerated in float64: a state's log-weight is a sum of factors that may be large (an Ising
-        strength of 1e7, say), and in float32 the small differences between the states' weights would be
-        lost, so that their probabilities no longer sum to 1."""
-        return PairwiseMRF(self._theta.detach().double(), self._coupling.detach().double(), self._edge_index,
-                           burn_in=self.config.burn_in, kernel=self.config.kernel, generator=self._generator,
-                           exact_max_n=EXACT_LIMIT)
+        """q for enumeration: in float64 where a state's log-weight, a sum of factors, may reach
+        :data:`FLOAT32_EXACT_WEIGHT` in size (an Ising strength of 1e7, say), since float32 would lose the small
+        differences between the states' weights, and their probabilities would no longer sum to 1."""
+        theta, coupling = self._theta.detach(), self._coupling.detach()
+        if float(theta.abs().sum() + coupling.abs().sum()) > FLOAT32_EXACT_WEIGHT:
+            theta, coupling = theta.double(), coupling.double()
+        return PairwiseMRF(theta.clone(), coupling.clone(), self._edge_index, burn_in=self.config.burn_in,
+                           kernel=self.config.kernel, generator=self._generator, exact_max_n=EXACT_LIMIT)
