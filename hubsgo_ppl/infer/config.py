@@ -40,8 +40,9 @@ class InferenceSpec(BaseModel):
     baseline_beta: float = Field(
         0.9, ge=0, lt=1, description="decay of TraceGraph_ELBO's average baseline (variance reduction)")
     init_scale: float = Field(
-        1.0, ge=-1e9, le=1e9, allow_inf_nan=False,
-        description="initial coupling = init_scale * human edge sign (init: edges); the couplings are float32")
+        1.0, ge=0, le=1e9, allow_inf_nan=False,
+        description="initial coupling = init_scale * human edge sign (init: edges; a sign's direction is the edge's, "
+                    "so the scale is 0 or more); the couplings are float32")
     init: Literal["edges", "prior"] = Field(
         "edges", description="where q starts: theta = 0, J = init_scale * edge sign ('edges'), or q = p(w) "
                              "('prior': KL = 0 before any data; needs a prior the guide's family holds, e.g. "

@@ -35,7 +35,7 @@ def test_config_is_the_spec_with_the_paper_defaults():
 @pytest.mark.parametrize("key, value", [
     ("lr", -1.0), ("lr", float("inf")), ("lr", float("nan")), ("burn_in", -1), ("burn_in", 1.5),
     ("num_samples", 1), ("kernel", "gibbs"), ("baseline_beta", 1.0), ("init_scale", float("nan")),
-    ("init_scale", 1e39), ("init_scale", -1e10),
+    ("init_scale", 1e39), ("init_scale", -1e10), ("init_scale", -0.5),
     ("exact_max_n", 21), ("init", "zeros"), ("pyro_validation", "sometimes"), ("jit", "yes"), ("jit", 1),
 ])
 def test_bad_values_raise_one_line_naming_the_field(key, value):
