@@ -244,6 +244,13 @@ class ModelSpec(StrictModel):
     likelihood: ComponentSpec = Field(default_factory=lambda: ComponentSpec(**DEFAULT_LIKELIHOOD))
     inference: InferenceSpec = Field(default_factory=InferenceSpec)
 
+    @field_validator("name")
+    @classmethod
+    def _name_ok(cls, v: str) -> str:
+        if not v.strip():
+            raise ValueError("the spec's name is empty; name it (e.g. after its task and graph)")
+        return v
+
     @field_validator("subgoals")
     @classmethod
     def _subgoals_ok(cls, v: list[str]) -> list[str]:
@@ -285,8 +292,8 @@ class ModelSpec(StrictModel):
     @model_validator(mode="after")
     def _graph_ok(self) -> "ModelSpec":
         names = set(self.subgoals)
-        pairs: set[frozenset[str]] = set()
-        for i, (u, v, _) in enumerate(self.edges):
+        pairs: dict[frozenset[str], str] = {}
+        for i, (u, v, sign) in enumerate(self.edges):
             for end in (u, v):
                 if end not in names:
                     close = difflib.get_close_matches(end, self.subgoals, n=1)
@@ -296,9 +303,13 @@ class ModelSpec(StrictModel):
                                      f"{', '.join(self.subgoals)}")
             if u == v:
                 raise ValueError(f"edges[{i}]: self-edge on {u!r}; an edge joins two different sub-goals")
-            if frozenset((u, v)) in pairs:
+            earlier = pairs.get(frozenset((u, v)))
+            if earlier is not None and earlier != sign:
+                raise ValueError(f"edges[{i}]: {u!r}-{v!r} is given both {earlier!r} and {sign!r}; keep the sign you "
+                                 "believe, or 'unknown' where you do not know")
+            if earlier is not None:
                 raise ValueError(f"edges[{i}]: duplicate edge {u!r}-{v!r}; give each pair once")
-            pairs.add(frozenset((u, v)))
+            pairs[frozenset((u, v))] = sign
         from .graph import SubgoalGraph
         from .infer.priors import get_prior
 
