@@ -146,23 +146,26 @@ def build_parser() -> argparse.ArgumentParser:
     v = sub.add_parser("review", help="mixed-initiative review of a HUBS-GO run: G*, marginals and their trend, "
                                       "learned couplings against your edge signs, suggested spec changes")
     v.add_argument("run_dir", help=RUN_HELP)
-    v.add_argument("--threshold", type=float, default=0.2, help="suggest dropping sub-goals with P(w=1) below this")
+    v.add_argument("--threshold", type=float, default=0.2,
+                   help="suggest dropping sub-goals with P(w=1) below this (default 0.2)")
     v.add_argument("--dead-band", type=float, default=0.1,
-                   help="couplings with |J| at most this have no sign (neither contradict nor suggest one)")
+                   help="couplings with |J| at most this have no sign (neither contradict nor suggest one; "
+                        "default 0.1)")
     v.add_argument("--out", help="review folder (default RUN_DIR/review; its review.json is the trend's baseline)")
     v.add_argument("--no-gif", action="store_true", help="skip the greedy-episode GIF (MiniGrid mazes)")
-    v.add_argument("--seed", type=_seed, default=None, help="evaluation seed of the GIF's episode")
-    v.add_argument("--samples", type=int, default=10_000, help="critic samples for G*")
-    v.add_argument("--top-k", type=int, default=5, help="sub-goal sets listed")
-    v.add_argument("--last", type=int, default=20, help="episodes of metrics.csv summarised")
+    v.add_argument("--seed", type=_seed, default=None,
+                   help="evaluation seed of the GIF's episode (default: derived from the run's)")
+    v.add_argument("--samples", type=int, default=10_000, help="critic samples for G* (default 10,000)")
+    v.add_argument("--top-k", type=int, default=5, help="sub-goal sets listed (default 5)")
+    v.add_argument("--last", type=int, default=20, help="episodes of metrics.csv summarised (default 20)")
     v.set_defaults(func=readouts.cmd_review)
 
     n = sub.add_parser("render", help="animated GIF of one greedy episode on a MiniGrid maze, sub-goals marked")
     n.add_argument("run_dir", help=RUN_HELP)
     n.add_argument("--out", help="GIF to write (default RUN_DIR/episode.gif)")
     n.add_argument("--seed", type=_seed, default=None, help="evaluation seed (default: derived from the run's)")
-    n.add_argument("--tile-size", type=int, default=32, help="pixels per grid cell")
-    n.add_argument("--fps", type=float, default=6.0, help="frames per second")
+    n.add_argument("--tile-size", type=int, default=32, help="pixels per grid cell (default 32)")
+    n.add_argument("--fps", type=float, default=6.0, help="frames per second (default 6)")
     n.set_defaults(func=readouts.cmd_render)
 
     k = sub.add_parser("tasks", help="list the tasks and their sub-goal catalogues; given a task or catalogue, "
