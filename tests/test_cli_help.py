@@ -1,10 +1,15 @@
-"""The command-line help is a reference of its own: every option that has a default says it."""
+"""The command-line help is a reference of its own: every option that has a default says it, and every
+output folder of a read-out can be moved out of the run folder (a run one may read but not write)."""
 
 from __future__ import annotations
 
 import argparse
 
-from hubsgo_ppl.cli import build_parser
+from hubsgo_ppl.cli import build_parser, main
+
+TINY = ["--set", "high.learning_starts=8", "--set", "high.batch_size=8", "--set", "low.learning_starts=64",
+        "--set", "low.batch_size=32", "--set", "low.hidden=[32]", "--set", "high.hidden=[32]",
+        "--set", "loop.option_steps=15", "--set", "env.max_steps=150"]
 
 
 def _commands() -> dict[str, argparse.ArgumentParser]:
@@ -23,4 +28,14 @@ def test_every_option_with_a_default_names_it_in_its_help():
             if "default" not in (action.help or ""):
                 missing.append(f"{name} {action.option_strings[0]}")
     assert not missing, missing
+
+
+def test_diagnose_writes_elsewhere_with_out_and_leaves_the_run_folder_as_it_was(tmp_path, capsys):
+    run, out = tmp_path / "run", tmp_path / "diag"
+    assert main(["train", "keydoor", "--steps", "300", "--out", str(run), "--no-progress", *TINY]) == 0
+    before = sorted(p.name for p in run.iterdir())
+    assert main(["diagnose", str(run), "--chains", "2", "--draws", "20", "--burn-in", "2", "--out", str(out)]) == 0
+    assert sorted(p.name for p in run.iterdir()) == before
+    assert {"summary.csv", "trace.png", "mrf_graph.png", "posterior.nc"} <= {p.name for p in out.iterdir()}
+    assert f"summary: {out / 'summary.csv'}" in capsys.readouterr().out
 

@@ -123,6 +123,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="samples kept per chain, after the burn-in (default 2,000)")
     d.add_argument("--burn-in", type=int, default=256, metavar="N",
                    help="MH sweeps per chain discarded before the draws are kept (default 256)")
+    d.add_argument("--out", help="folder of the summary, plots and netCDF (default RUN_DIR/diagnostics)")
     d.set_defaults(func=readouts.cmd_diagnose)
 
     w = sub.add_parser("sweep", help="run a grid of tasks x agents x variants x seeds (resumable)")

@@ -63,7 +63,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     for flag, value, least in (("--chains", args.chains, 2), ("--draws", args.draws, 2), ("--burn-in", args.burn_in, 0)):
         if value < least:
             raise RunError(f"{flag} must be at least {least}, got {value}")
-    result = diagnose(args.run_dir, chains=args.chains, draws=args.draws, burn_in=args.burn_in)
+    result = diagnose(args.run_dir, chains=args.chains, draws=args.draws, burn_in=args.burn_in, out=args.out)
     table = result["summary"]
     with pd.option_context("display.width", 120, "display.max_columns", 20):
         print(f"ArviZ summary of q(w) from {result['chains']} chains x {result['draws']} draws:")
