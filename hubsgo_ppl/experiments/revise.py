@@ -157,7 +157,7 @@ def apply_revision(run_dir: str | Path, new_spec: str | Path, steps: int | None 
     successes (``record["finished"]``)."""
     if not (Path(run_dir) / CHECKPOINT).is_file():     # refused before the lock creates anything
         run_dir_checkpoint(Path(run_dir))
-    with run_folder_lock(run_dir):     # no train or other revision writes the folder meanwhile
+    with run_folder_lock(run_dir, flag=""):     # no train or other revision writes the folder meanwhile
         return _apply_revision(Path(run_dir), new_spec, steps, train_after)
 
 
