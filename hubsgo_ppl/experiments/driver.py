@@ -352,7 +352,8 @@ def _refuse_nested(out: Path) -> None:
     inner = sorted(c.name for c in out.iterdir() if c.is_dir() and is_run(c)) if out.is_dir() else []
     if inner:
         raise RunError(f"{out} holds runs of its own ({', '.join(inner[:3])}{', ...' if len(inner) > 3 else ''}); "
-                       "a run trained there would mix its files with theirs; choose another --out")
+                       f"a run trained there would mix its files with theirs; give one of them (--out "
+                       f"{out / inner[0]}) or choose another --out")
     if is_run(out.parent):
         raise RunError(f"{out.parent} is a run's folder; a run trained in {out.name}/ inside it would be read as "
                        "part of it; choose another --out")
