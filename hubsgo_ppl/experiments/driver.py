@@ -215,14 +215,13 @@ def _resume(cfg: RunConfig, out: Path, stop_at: int | None = None):
     if target > done:       # a run with nothing left to train, or a --steps it has passed, is told so below
         _check_stop_at(stop_at, target, done, out)
     check_episode_log(out, int(ckpt["episodes"]))
+    if cfg.steps is not None and int(cfg.steps) != budget and int(cfg.steps) <= done:    # refused as it is
+        raise RunError(f"{out}: the run has already taken {done:,} env steps; pass --steps above {done} "
+                       f"to train on (its budget is {budget:,})")
     _tidy(out, ())
     for name in EPISODE_LOGS:
         truncate_csv(out / name, "episode", int(ckpt["episodes"]))
-    if cfg.steps is not None and int(cfg.steps) != budget:
-        if int(cfg.steps) <= done:
-            raise RunError(f"{out}: the run has already taken {done:,} env steps; pass --steps above {done} "
-                           f"to train on (its budget is {budget:,})")
-    elif done >= budget:
+    if (cfg.steps is None or int(cfg.steps) == budget) and done >= budget:
         print(f"hubsgo: {out} has finished its budget of {budget:,} env steps; nothing to train (pass --steps "
               f"above {done} to train on)", file=sys.stderr)
     run, env, agent = restore(out / CHECKPOINT, ckpt, cfg.steps)

@@ -1,0 +1,22 @@
+"""A `--resume` that is refused leaves the run as it was: its logs are cut back to the checkpoint only
+once the resume goes ahead."""
+
+from __future__ import annotations
+
+from hubsgo_ppl.cli import main
+
+TINY = ["--set", "high.learning_starts=8", "--set", "high.batch_size=8", "--set", "low.learning_starts=64",
+        "--set", "low.batch_size=32", "--set", "low.hidden=[32]", "--set", "high.hidden=[32]",
+        "--set", "loop.option_steps=15", "--set", "env.max_steps=150"]
+FILES = ("metrics.csv", "critic_history.csv", "subgoals.json", "config.yaml")
+
+
+def test_a_resume_refused_for_a_budget_below_the_steps_taken_keeps_every_file(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["train", "keydoor", "--steps", "300", "--out", str(out), "--no-progress", *TINY]) == 0
+    before = {name: (out / name).read_bytes() for name in FILES}
+    assert b",final," in before["critic_history.csv"] or b",settled," in before["critic_history.csv"]
+    capsys.readouterr()
+    assert main(["train", "keydoor", "--steps", "200", "--out", str(out), "--resume", "--no-progress"]) == 2
+    assert "has already taken" in capsys.readouterr().err
+    assert {name: (out / name).read_bytes() for name in FILES} == before
