@@ -218,13 +218,17 @@ def _resume(cfg: RunConfig, out: Path, stop_at: int | None = None):
     if cfg.steps is not None and int(cfg.steps) != budget and int(cfg.steps) <= done:    # refused as it is
         raise RunError(f"{out}: the run has already taken {done:,} env steps; pass --steps above {done} "
                        f"to train on (its budget is {budget:,})")
-    _tidy(out, ())
-    for name in EPISODE_LOGS:
-        truncate_csv(out / name, "episode", int(ckpt["episodes"]))
+    run, env, agent = restore(out / CHECKPOINT, ckpt, cfg.steps)     # refusals here leave the logs as they are
+    try:
+        _tidy(out, ())
+        for name in EPISODE_LOGS:
+            truncate_csv(out / name, "episode", int(ckpt["episodes"]))
+    except BaseException:
+        env.close()
+        raise
     if (cfg.steps is None or int(cfg.steps) == budget) and done >= budget:
         print(f"hubsgo: {out} has finished its budget of {budget:,} env steps; nothing to train (pass --steps "
               f"above {done} to train on)", file=sys.stderr)
-    run, env, agent = restore(out / CHECKPOINT, ckpt, cfg.steps)
     on_disk = recorded_run(out)
     if on_disk is None or on_disk.to_dict() != run.to_dict():   # a new budget, a lost or damaged file
         write_yaml(out / "config.yaml", run.to_dict())

@@ -20,3 +20,22 @@ def test_a_resume_refused_for_a_budget_below_the_steps_taken_keeps_every_file(tm
     assert main(["train", "keydoor", "--steps", "200", "--out", str(out), "--resume", "--no-progress"]) == 2
     assert "has already taken" in capsys.readouterr().err
     assert {name: (out / name).read_bytes() for name in FILES} == before
+
+
+def test_a_resume_refused_while_rebuilding_the_run_keeps_every_file(tmp_path, capsys, monkeypatch):
+    """As a run whose env or critic class cannot be imported in this process (PYTHONPATH unset)."""
+    from hubsgo_ppl.experiments import driver
+    from hubsgo_ppl.experiments.resolved import RunError
+
+    out = tmp_path / "run"
+    assert main(["train", "keydoor", "--steps", "300", "--out", str(out), "--no-progress", *TINY]) == 0
+    before = {name: (out / name).read_bytes() for name in FILES}
+
+    def cannot_import(*args, **kwargs):
+        raise RunError("cannot import 'my_env'; add its folder to PYTHONPATH")
+
+    monkeypatch.setattr(driver, "restore", cannot_import)
+    capsys.readouterr()
+    assert main(["train", "keydoor", "--steps", "600", "--out", str(out), "--resume", "--no-progress"]) == 2
+    assert "cannot import" in capsys.readouterr().err
+    assert {name: (out / name).read_bytes() for name in FILES} == before
