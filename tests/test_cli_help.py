@@ -39,3 +39,30 @@ def test_diagnose_writes_elsewhere_with_out_and_leaves_the_run_folder_as_it_was(
     assert {"summary.csv", "trace.png", "mrf_graph.png", "posterior.nc"} <= {p.name for p in out.iterdir()}
     assert f"summary: {out / 'summary.csv'}" in capsys.readouterr().out
 
+
+
+def test_read_outs_refuse_an_unwritable_destination_before_any_work(tmp_path, capsys, monkeypatch):
+    import tempfile
+
+    from hubsgo_ppl.diagnostics import diagnose, render, review
+
+    run = tmp_path / "run"
+    assert main(["train", "keydoor", "--steps", "300", "--out", str(run), "--no-progress", *TINY]) == 0
+    capsys.readouterr()
+
+    def read_only(*args, **kwargs):
+        raise OSError(30, "Read-only file system")
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("work started before the destination was checked")
+
+    monkeypatch.setattr(tempfile, "TemporaryFile", read_only)
+    monkeypatch.setattr(diagnose, "diagnose", no_work)
+    monkeypatch.setattr(review, "review", no_work)
+    monkeypatch.setattr(render, "render_episode", no_work)
+    for command, default in (("diagnose", "RUN_DIR/diagnostics"), ("review", "RUN_DIR/review"),
+                             ("render", "RUN_DIR/episode.gif")):
+        assert main([command, str(run)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err == [f"hubsgo: error: {run}: cannot write here (Read-only file system; the default is {default}); "
+                       "give --out, a place you can write"], err

@@ -6,11 +6,32 @@ import argparse
 import contextlib
 import json
 import sys
+import tempfile
 from pathlib import Path
 
 from .show import format_ranking
 
 __all__ = ["cmd_evaluate", "cmd_subgoals", "cmd_diagnose", "cmd_review", "cmd_render"]
+
+
+def _writable(target: Path, run_dir: str, default: str) -> None:
+    """Refuse, before any work, to write ``target`` (a folder, or a file's folder) where the nearest existing
+    folder cannot be written, e.g. a run folder on a read-only disk: the work would be lost at the end."""
+    if not Path(run_dir).is_dir():
+        return                  # the command names the missing run itself
+    folder = target
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    if not folder.is_dir():
+        return
+    try:
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as exc:
+        from ..experiments.run import RunError
+
+        raise RunError(f"{folder}: cannot write here ({exc.strerror}; the default is {default}); give --out, a "
+                       "place you can write") from None
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
@@ -63,6 +84,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     for flag, value, least in (("--chains", args.chains, 2), ("--draws", args.draws, 2), ("--burn-in", args.burn_in, 0)):
         if value < least:
             raise RunError(f"{flag} must be at least {least}, got {value}")
+    _writable(Path(args.out) if args.out else Path(args.run_dir) / "diagnostics", args.run_dir, "RUN_DIR/diagnostics")
     result = diagnose(args.run_dir, chains=args.chains, draws=args.draws, burn_in=args.burn_in, out=args.out)
     table = result["summary"]
     with pd.option_context("display.width", 120, "display.max_columns", 20):
@@ -81,6 +103,7 @@ def cmd_review(args: argparse.Namespace) -> int:
     from ..diagnostics.review import review
 
     out = Path(args.out) if args.out else Path(args.run_dir) / "review"
+    _writable(out, args.run_dir, "RUN_DIR/review")
     r = review(args.run_dir, threshold=args.threshold, out=out, gif=not args.no_gif, dead_band=args.dead_band,
                num_samples=args.samples, top_k=args.top_k, last=args.last, seed=args.seed)
     g = r["g_star"]
@@ -147,6 +170,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     from ..diagnostics.render import render_episode
     from ..diagnostics.review import CHOSEN_SHOWN, format_chosen
 
+    _writable(Path(args.out).parent if args.out else Path(args.run_dir), args.run_dir, "RUN_DIR/episode.gif")
     r = render_episode(args.run_dir, args.out, seed=args.seed, tile_size=args.tile_size, fps=args.fps)
     outcome = "success" if r["success"] else "no success"
     print(f"{r['path']}: {r['frames']} frames, one greedy episode of {r['length']} steps (env seed {r['env_seed']}, "
