@@ -34,11 +34,17 @@ def _check_task(name: str, info: Any, model: str | None) -> None:
     `hubsgo check-env`, which builds it as this does), a maze's reachability and optimum, and the
     critic spec the run would use."""
     from ..envs import make
+    from ..envs.check import scene_warnings
     from ..experiments.run import RunConfig, resolve
 
     from ..envs.minigrid.registered import is_registered
 
-    make(name).close()         # refuses a bad option, kind or argument, as `hubsgo check-env` does
+    env = make(name)           # refuses a bad option, kind or argument, as `hubsgo check-env` does
+    try:
+        for warning in scene_warnings(env):
+            print(f"    scene: WARNING: {warning}")
+    finally:
+        env.close()
 
     if info.family == "minigrid" and not is_registered(info.catalogue):
         from ..envs.minigrid.bfs import check_reachable, optimal_steps_range
@@ -80,7 +86,7 @@ def cmd_check_env(args: argparse.Namespace) -> int:
     """``hubsgo check-env ENV``: :func:`hubsgo_ppl.envs.check.check_env` on a task, a catalogue or a
     registered Gymnasium id; prints what is missing, one line each, then the optional parts."""
     from ..envs import _GYM_ID, UnknownTaskError, make
-    from ..envs.check import check_env, env_notes
+    from ..envs.check import check_env, env_notes, scene_warnings
     from ..experiments.run import RunError
 
     if args.steps < 1:
@@ -96,6 +102,7 @@ def cmd_check_env(args: argparse.Namespace) -> int:
     try:
         problems = check_env(env, steps=args.steps, seed=args.seed)
         notes = env_notes(env) if not problems else []
+        warnings = scene_warnings(env) if not problems else []
     finally:
         env.close()
     if route:       # a bare Gymnasium id: the catalogue that trains it
@@ -104,9 +111,13 @@ def cmd_check_env(args: argparse.Namespace) -> int:
         print(f"missing: {problem}")
     for note in notes:
         print(f"note: {note}")
+    for warning in warnings:
+        print(f"warning: {warning}")
     if not problems:
-        print(f"{args.env}: meets the sub-goal contract ({args.steps} steps, seed {args.seed})")
-    return 1 if problems else 0
+        count = f"{len(warnings)} warning{'s' * (len(warnings) != 1)}"
+        but = f"; but its scene cannot be solved as built ({count} above)" if warnings else ""
+        print(f"{args.env}: meets the sub-goal contract ({args.steps} steps, seed {args.seed}){but}")
+    return 1 if problems or warnings else 0
 
 
 def _gym_env(env_id: str, unknown: Exception) -> Any:

@@ -155,3 +155,10 @@ def env_notes(env: gym.Env) -> list[str]:
     if not callable(getattr(task, "subgoal_target", None)):
         notes.append("no subgoal_target(i): the scripted low levels cannot be used (--low-level learned)")
     return notes
+
+
+def scene_warnings(env: gym.Env) -> list[str]:
+    """What the env's scene makes impossible, where it can tell (an arm scene: objects off the table,
+    targets out of the arm's reach); resets the env."""
+    scene = getattr(env.unwrapped, "scene_problems", None)
+    return list(scene()) if callable(scene) else []

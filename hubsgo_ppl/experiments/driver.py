@@ -270,6 +270,16 @@ def _new(run: ResolvedRun, out: Path, cfg: RunConfig | None, started: bool, resu
             short = max_steps_below_solution(run.task_ref, (run.hyper.get("env") or {}).get("max_steps"))
             if short:
                 print(f"hubsgo: warning: {cfg.task}: {short}", file=sys.stderr)
+    if run.family == "robosuite" and is_catalogue(run.task_ref) and not resumed and not get_task(run.task_ref).shipped:
+        from ..envs import make
+        from ..envs.check import scene_warnings
+
+        env = make(run.task_ref, **run.section("env"))      # a scene of its own, so training's starts untouched
+        try:
+            for warning in scene_warnings(env):
+                print(f"hubsgo: warning: {cfg.task if cfg else run.task}: {warning}", file=sys.stderr)
+        finally:
+            env.close()
     if not resumed:
         note_unlinked_goals(run)
     plan = schedules = None

@@ -19,6 +19,7 @@ from .base import SubgoalManipulationEnv
 from .collect_three_balls import CollectThreeBalls
 from .options import positive_options, scene_options
 from .push_any_one import PushAnyOne
+from .scene_check import scene_problems
 from .stack_cubes import StackCubes
 
 __all__ = ["TASK_CLASSES", "RobosuiteTaskEnv", "make_robosuite_task"]
@@ -67,6 +68,12 @@ class RobosuiteTaskEnv(gym.Env):
     @property
     def horizon(self) -> int:
         return self.task.horizon
+
+    def scene_problems(self, seed: int = 0) -> list[str]:
+        """What the scene makes impossible after ``reset(seed=seed)``: objects off the table, targets out of
+        the arm's reach (:mod:`.scene_check`); resets the env."""
+        self.reset(seed=seed)
+        return scene_problems(self.task)
 
     # ---------------------------------------------------------------- gymnasium API
     def _flat(self, obs: dict) -> np.ndarray:

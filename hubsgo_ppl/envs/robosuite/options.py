@@ -5,6 +5,8 @@ catalogue and the option (docs/arms.md, "Scenes and their options"); and its num
 
 from __future__ import annotations
 
+import math
+
 from typing import Any, Callable
 
 from ...specs import SpecError
@@ -70,7 +72,8 @@ def _noise_ok(value: Any) -> bool:
     if not isinstance(value, dict) or set(value) != {"magnitude", "type"}:
         return False
     magnitude = value["magnitude"]
-    return (isinstance(magnitude, (int, float)) and not isinstance(magnitude, bool) and magnitude >= 0
+    # the noise is added to the joint angles: past half a turn it only makes the start unstable
+    return (isinstance(magnitude, (int, float)) and not isinstance(magnitude, bool) and 0 <= magnitude <= math.pi
             and value["type"] in ("gaussian", "uniform"))
 
 
@@ -96,7 +99,7 @@ def _seed_ok(value: Any) -> bool:
 
 #: the other scene options a catalogue may set -> (check, what a valid value is)
 SCENE_OPTIONS: dict[str, tuple[Callable[[Any], bool], str]] = {
-    "initialization_noise": (_noise_ok, "null, default or {magnitude: a number >= 0, type: gaussian or uniform}"),
+    "initialization_noise": (_noise_ok, "null, default or {magnitude: radians, 0 to 3.14, type: gaussian or uniform}"),
     "table_full_size": (_table_ok, "three positive numbers of metres (length, width, thickness)"),
     "robots": (_robot_ok, f"one of the single arms: {', '.join(ROBOTS)}"),
     "seed": (_seed_ok, "a whole number, 0 or more"),

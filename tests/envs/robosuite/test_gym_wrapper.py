@@ -145,6 +145,7 @@ def test_tasks_and_check_env_refuse_the_same_arm_catalogues(tmp_path, catalogue,
 
 
 @pytest.mark.parametrize("key, value", [("initialization_noise", "lots"), ("initialization_noise", "{magnitude: 0.1}"),
+                                        ("initialization_noise", "{magnitude: 100, type: gaussian}"),
                                         ("table_full_size", "[1, 2]"), ("table_full_size", "big"),
                                         ("robots", "Foo"), ("robots", "Baxter"), ("robots", "GR1"),
                                         ("robots", "PandaOmron"), ("robots", "XArm7"), ("seed", "abc"),
