@@ -61,8 +61,8 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--steps", type=int, help="environment-step budget (default: per task family)")
     t.add_argument("--seed", type=_seed, help="seed of every random stream of the run, 0 or more (default 0)")
     t.add_argument("--seeds", type=_seed, nargs="+", metavar="SEED",
-                   help="train several seeds in one process: hubsgo and hdqn with the learned low level of a grid task in "
-                        "lockstep (their networks updated together), other runs one seed after another; each "
+                   help="train several seeds in one process: hubsgo and hdqn with the learned low level of a grid "
+                        "task in lockstep (their networks updated together), other runs one seed after another; each "
                         "seed's run goes to OUT/seedK with --out, else to runs/TASK-AGENT-sSEED")
     t.add_argument("--workers", type=int, default=1, metavar="N",
                    help="with --seeds: processes (one CPU each) that share the seeds, each training its share "
