@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
+import sys
 from typing import Any
 
 __all__ = ["cmd_tasks", "cmd_check_env"]
@@ -71,7 +74,16 @@ def _check_task(name: str, info: Any, model: str | None) -> None:
         return
     from ..experiments.run import note_unlinked_goals, warn_goals_left_out
 
-    resolved = resolve(RunConfig(task=name, agent="hubsgo", model=model))
+    from ..experiments.resolve import BUDGET_NOTE
+
+    notes = io.StringIO()
+    with contextlib.redirect_stderr(notes):     # train's note on the budget it would take is a line of the listing
+        resolved = resolve(RunConfig(task=name, agent="hubsgo", model=model))
+    for line in notes.getvalue().splitlines():
+        if line.startswith(BUDGET_NOTE):
+            print(f"    budget: {line[len(BUDGET_NOTE):]} (train's default; --steps sets another)")
+        else:
+            print(line, file=sys.stderr)
     spec = resolved["model_spec"]
     left = resolved.get("subgoals")
     n_edges = len(spec["edges"])

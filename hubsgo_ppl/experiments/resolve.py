@@ -19,6 +19,9 @@ from ..envs.subset import catalogue_order, check_subset
 from .io import CheckpointError
 from .resolved import ResolvedRun, RunConfig, RunError, as_resolved
 
+#: how a run notes the budget it takes where none is given (``hubsgo tasks`` lists it as a line of its own)
+BUDGET_NOTE = "hubsgo: note: no --steps: "
+
 __all__ = ["resolve", "resolve_run", "task_ref", "catalogue_digest", "check_catalogue", "is_catalogue", "task_goals",
            "warn_goals_left_out", "note_unlinked_goals", "env_keys"]
 
@@ -195,7 +198,7 @@ def resolve_run(cfg: RunConfig) -> ResolvedRun:
             count, horizon = episodes
             hyper = resolve_hyper(info.family, preset_task, cfg.agent, cfg.overrides, steps=count * horizon,
                                   low_level=cfg.low_level)
-            print(f"hubsgo: note: no --steps: {count * horizon:,} env steps, the {info.family} family's {count} "
+            print(f"{BUDGET_NOTE}{count * horizon:,} env steps, the {info.family} family's {count} "
                   f"episodes of the task's {horizon}-step horizon", file=sys.stderr)
     except ValueError as exc:           # a ConfigError always; another ValueError where --set caused it
         if not (cfg.overrides or isinstance(exc, ConfigError)):

@@ -177,3 +177,16 @@ def test_set_env_robots_is_refused_in_one_line(tmp_path, capsys):
     code = main(["train", "push_any_one", "--steps", "10", "--set", "env.robots=Baxter", "--out", str(tmp_path / "r")])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "options.robots: 'Baxter' is not one of the single arms" in err[0], err
+
+
+def test_tasks_lists_the_budget_a_catalogue_without_one_takes_and_notes_nothing_of_steps(capsys):
+    from pathlib import Path
+
+    from hubsgo_ppl.cli import main
+
+    arms = Path(__file__).resolve().parents[3] / "examples" / "arms"
+    assert main(["tasks", str(arms / "push_four.yaml"), "--model", str(arms / "push_four-spec.yaml")]) == 0
+    out, err = capsys.readouterr()
+    assert ("    budget: 30,000 env steps, the robosuite family's 100 episodes of the task's 300-step horizon (train's "
+            "default; --steps sets another)") in out.splitlines()
+    assert "--steps" not in err
