@@ -112,8 +112,16 @@ def test_a_critic_that_never_updated_says_its_sets_are_the_priors():
     last = format_ranking(table).splitlines()[-1]
     assert last.startswith("1 training episode succeeded, but the critic had not started updating yet (it starts "
                            "after 67 high-level transitions (options); this run stored 16); these sets are its prior's")
+    assert "(your edges alone)" in last
     table["updates"] = 3
     assert "never updated" not in format_ranking(table) and "not started" not in format_ranking(table)
+    # a spec without edges (graph independent): the prior alone, no edges of the user's
+    spec = load_model_spec("keydoor-specific").model_copy(update={"graph": "independent", "edges": []})
+    table = {**subgoal_table(SubgoalCritic.from_spec(spec, seed=0), list(critic.names), num_samples=200),
+             "successes": 0}
+    assert format_ranking(table).splitlines()[-1].startswith(
+        "the critic never updated: no training episode succeeded, so it had no evidence, and these sets are its "
+        "prior's (the spec has no edges, so the prior alone)")
 
 
 def test_successes_before_the_critics_first_update_are_not_reported_as_none(tmp_path, capsys):

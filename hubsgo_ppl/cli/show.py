@@ -36,22 +36,25 @@ def _never_updated(table: dict[str, Any]) -> str:
     ``subgoals.json``; a file written without them gets both reasons)."""
     successes, starts = table.get("successes"), table.get("critic_starts") or {}
     source = table.get("critic_from")
+    # what the prior's sets rest on: the spec's edges, or the prior alone where it has none (independent)
+    alone = ("the spec has no edges, so the prior alone" if table.get("factors", {}).get("pairwise") == {}
+             else "your edges alone")
     if source:
         return (f"the critic never updated in this run: these sets are those of the critic transferred from "
                 f"{source} (--init-from), not your edges alone; {_TRAIN_LONGER}")
     if successes == 0:
         return ("the critic never updated: no training episode succeeded, so it had no evidence, and these sets are "
-                f"its prior's (your edges alone); {_TRAIN_LONGER}")
+                f"its prior's ({alone}); {_TRAIN_LONGER}")
     if successes:
         when = ("the high level's learning_starts or batch_size and then loop.critic_every minibatches"
                 if not starts else f"{starts['transitions']:,} high-level transitions (options); this run stored "
                                    f"{starts['stored']:,}")
         return (f"{successes} training episode{'s' * (successes != 1)} succeeded, but the critic had not started "
-                f"updating yet (it starts after {when}); these sets are its prior's (your edges alone); "
+                f"updating yet (it starts after {when}); these sets are its prior's ({alone}); "
                 f"{_TRAIN_LONGER}")
     return ("the critic never updated: either no training episode succeeded or the high level had not yet stored "
-            "the transitions its first update waits for (high.learning_starts); these sets are its prior's (your "
-            f"edges alone); {_TRAIN_LONGER}")
+            "the transitions its first update waits for (high.learning_starts); these sets are its prior's "
+            f"({alone}); {_TRAIN_LONGER}")
 
 
 def format_transfer(init: dict[str, Any]) -> str:
