@@ -178,9 +178,9 @@ _WARNED: set[str] = set()
 
 
 def _warn(line: str) -> None:
-    if line not in _WARNED:
-        _WARNED.add(line)
+    if line not in _WARNED and not _WARNED.add(line):       # once per process
         print(f"hubsgo: warning: {line}", file=sys.stderr)
+
 
 #: the MiniGrid actions a sub-goal kind cannot hold without (``forward`` is needed by every environment)
 NEEDS: dict[str, tuple[str, ...]] = {"carrying": ("pickup",), "cleared": ("pickup",), "door_open": ("toggle",),
