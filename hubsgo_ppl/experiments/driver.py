@@ -208,7 +208,9 @@ def _start(cfg: RunConfig, out: Path, resume: bool, stop_at: int | None = None
     return _new(run, out, cfg, started, resumed=False)
 
 
-def _resume(cfg: RunConfig, out: Path, stop_at: int | None = None):
+def check_resume_steps(cfg: RunConfig, out: Path, stop_at: int | None = None) -> dict:
+    """Refuse, before anything of the run is changed, a resume its checkpoint cannot take: ``--steps`` it
+    has passed, ``--stop-at`` out of range, a log cut short. Returns the checkpoint."""
     ckpt = read_checkpoint(out / CHECKPOINT)
     done, budget = int(ckpt["env_steps"]), int(ckpt["config"]["hyper"]["steps"])
     target = budget if cfg.steps is None else int(cfg.steps)
@@ -218,6 +220,12 @@ def _resume(cfg: RunConfig, out: Path, stop_at: int | None = None):
     if cfg.steps is not None and int(cfg.steps) != budget and int(cfg.steps) <= done:    # refused as it is
         raise RunError(f"{out}: the run has already taken {done:,} env steps; pass --steps above {done} "
                        f"to train on (its budget is {budget:,})")
+    return ckpt
+
+
+def _resume(cfg: RunConfig, out: Path, stop_at: int | None = None):
+    ckpt = check_resume_steps(cfg, out, stop_at)
+    done, budget = int(ckpt["env_steps"]), int(ckpt["config"]["hyper"]["steps"])
     run, env, agent = restore(out / CHECKPOINT, ckpt, cfg.steps)     # refusals here leave the logs as they are
     try:
         _tidy(out, ())

@@ -36,7 +36,8 @@ from ..agents.loop import UPDATE_LOW, HRLLoop
 from ..agents.low_level import GoalDQN
 from ..errors import RunInterrupted
 from .callbacks import default_callbacks
-from .driver import RunSession, _interrupted, train
+from .checkpoint import CHECKPOINT
+from .driver import RunSession, _interrupted, check_resume_steps, train
 from .lock import run_folder_lock
 from .resolved import ResolvedRun, RunConfig, RunError
 
@@ -63,6 +64,9 @@ def train_lockstep(cfg: RunConfig, seeds: list[int], outs: list[Path], resumes: 
         with contextlib.ExitStack() as closing:
             for out in outs:
                 closing.enter_context(run_folder_lock(out))
+            for seed, out, again in zip(seeds, outs, resumes):      # every seed's refusal before any log is cut
+                if again and (out / CHECKPOINT).is_file():
+                    check_resume_steps(replace(cfg, seed=seed), out)
             sessions = [RunSession(replace(cfg, seed=seed), out, again,
                                    default_callbacks(None, None, progress and i == 0, hook), where, closing)
                         for i, (seed, out, again, hook, where) in enumerate(zip(seeds, outs, resumes, hooks, wheres))]

@@ -39,3 +39,17 @@ def test_a_resume_refused_while_rebuilding_the_run_keeps_every_file(tmp_path, ca
     assert main(["train", "keydoor", "--steps", "600", "--out", str(out), "--resume", "--no-progress"]) == 2
     assert "cannot import" in capsys.readouterr().err
     assert {name: (out / name).read_bytes() for name in FILES} == before
+
+
+def test_seeds_resumed_together_are_refused_before_any_seeds_logs_are_cut(tmp_path, capsys):
+    out = tmp_path / "runs"
+    assert main(["train", "keydoor", "--seeds", "0", "1", "--steps", "300", "--out", str(out), "--no-progress",
+                 *TINY]) == 0
+    assert main(["train", "keydoor", "--steps", "900", "--out", str(out / "seed1"), "--resume", "--no-progress"]) == 0
+    before = {(seed, name): (out / seed / name).read_bytes() for seed in ("seed0", "seed1") for name in FILES}
+    capsys.readouterr()
+    # seed 0 could go on to 600 steps, seed 1 has passed them: refused, and neither run is touched
+    assert main(["train", "keydoor", "--seeds", "0", "1", "--steps", "600", "--out", str(out), "--resume",
+                 "--no-progress"]) == 2
+    assert "seed1: the run has already taken" in capsys.readouterr().err
+    assert {(seed, name): (out / seed / name).read_bytes() for seed in ("seed0", "seed1") for name in FILES} == before
