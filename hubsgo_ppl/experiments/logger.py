@@ -65,7 +65,9 @@ class CSVOutput(KVWriter):
         new = [k for k in key_values if k not in self.fields]
         if new:
             rows = read_csv_rows(self.path) if self.fields else []
-            self.fields += new
+            # the run's wall time stays the last column, as in a log whose keys all came with its first row
+            tail = self.fields[-1:] if self.fields[-1:] == ["wall_time"] else []
+            self.fields = self.fields[:len(self.fields) - len(tail)] + new + tail
             buf = io.StringIO(newline="")
             w = csv.DictWriter(buf, fieldnames=self.fields)
             w.writeheader()

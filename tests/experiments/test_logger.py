@@ -34,6 +34,16 @@ def test_csv_output_grows_header_and_keeps_rows(tmp_path):
     assert path.read_text().splitlines()[0] == "episode,return,critic/loss"
 
 
+def test_keys_that_come_after_the_first_row_go_before_the_wall_time(tmp_path):
+    """An agent whose losses start after its first episode logs the columns of one whose losses come at once."""
+    path = tmp_path / "m.csv"
+    out = CSVOutput(path)
+    out.write({"episode": 0, "return": 0.0, "wall_time": 0.1}, 0)
+    out.write({"episode": 1, "return": 1.0, "high/loss": 0.5, "wall_time": 0.2}, 1)
+    assert path.read_text().splitlines()[0] == "episode,return,high/loss,wall_time"
+    assert read_csv_rows(path)[0] == {"episode": "0", "return": "0.0", "high/loss": "", "wall_time": "0.1"}
+
+
 def test_logger_is_sb3s_and_csv_honours_exclude(tmp_path):
     path = tmp_path / "m.csv"
     log = Logger([CSVOutput(path)])
