@@ -171,9 +171,20 @@ def _catalogue_route(env: Any) -> str:
     except ImportError:
         MiniGridEnv = ()
     if isinstance(env.unwrapped, MiniGridEnv):
-        return ("a MiniGrid environment: to train on it, write a catalogue with family: minigrid and "
-                "options.gym_id naming it, and list its sub-goals (docs/minigrid.md); `hubsgo check-env` that "
-                "catalogue checks it with the sub-goals")
+        from ..envs.minigrid.draft import draft_catalogue, draft_text
+        from ..envs.minigrid.registered import PROBE_RESETS
+
+        gym_id = env.spec.id if env.spec is not None else None
+        route = ("a MiniGrid environment: to train on it, write a catalogue with family: minigrid and "
+                 "options.gym_id naming it, and list its sub-goals (docs/minigrid.md); `hubsgo check-env` that "
+                 "catalogue checks it with the sub-goals")
+        if gym_id is None:
+            return route
+        draft = draft_catalogue(gym_id)
+        task = draft["task"]
+        return (f"{route}. A draft from its {PROBE_RESETS} seeded layouts (an object, door or goal they have, and "
+                f"the actions these need) to save as {task}.yaml, edit, and train with `hubsgo train {task}.yaml "
+                f"--graph independent` (or --model your spec, with your signed edges):\n\n{draft_text(draft)}")
     if not isinstance(env.action_space, gym.spaces.Discrete):
         return (f"its actions are {type(env.action_space).__name__}, and a Gymnasium environment of your own trains "
                 "on Discrete actions only (docs/own_env.md); the arm tasks' continuous control is the robosuite "

@@ -114,7 +114,8 @@ def get_task(name_or_path: str | Path) -> TaskInfo:
             raise UnknownTaskError(
                 f"{name!r} is a Gymnasium id, not a task: write a catalogue that names it and lists the sub-goals "
                 "to learn (family minigrid with options.gym_id for MiniGrid's environments, docs/minigrid.md; "
-                "family gym for any other, docs/own_env.md), and pass the catalogue's path")
+                f"family gym for any other, docs/own_env.md), and pass the catalogue's path; `hubsgo check-env "
+                f"{name}` prints a draft for a MiniGrid environment")
         raise UnknownTaskError(
             f"unknown task {name!r}; use one of: {', '.join(sorted(known))} "
             f"(`hubsgo tasks` lists them), or a path to a catalogue .yaml")

@@ -3,6 +3,7 @@
 import gymnasium as gym
 import numpy as np
 import pytest
+import yaml
 
 from hubsgo_ppl.cli import main
 from hubsgo_ppl.envs import make, tasks
@@ -105,14 +106,41 @@ def test_the_cli_passes_a_task_fails_a_plain_env_and_refuses_an_unknown_one(caps
     assert len(err) == 1 and "unknown task 'no_such_env'" in err[0]
 
 
-def test_a_minigrid_id_is_checked_and_pointed_to_the_catalogue_route(capsys):
+def test_a_minigrid_id_is_checked_and_pointed_to_the_catalogue_route_with_a_draft(capsys, tmp_path):
     assert main(["check-env", "MiniGrid-Unlock-v0", "--steps", "10"]) == 1
-    out = capsys.readouterr().out.strip().splitlines()
-    missing = [line for line in out if line.startswith("missing: ")]
+    out = capsys.readouterr().out.strip().split("\n\n")
+    lines = out[0].splitlines()
+    missing = [line for line in lines if line.startswith("missing: ")]
     assert missing[0].startswith("missing: observation_space: a flat gymnasium.spaces.Box is needed, got Dict")
     assert any("unwrapped.subgoal_names" in line for line in missing)
-    assert out[-1].startswith("note: a MiniGrid environment") and "options.gym_id" in out[-1]
-    assert "docs/minigrid.md" in out[-1]
+    assert lines[-1].startswith("note: a MiniGrid environment") and "options.gym_id" in lines[-1]
+    assert "docs/minigrid.md" in lines[-1] and "save as unlock.yaml" in lines[-1]
+    # the draft: Unlock's one locked door, the key that opens it, and the toggle on which Unlock pays
+    draft = yaml.safe_load(out[1])
+    assert draft == {"task": "unlock", "family": "minigrid",
+                     "options": {"gym_id": "MiniGrid-Unlock-v0", "actions": ["left", "right", "forward", "pickup",
+                                                                            "toggle"]},
+                     "subgoals": [{"name": "key", "kind": "carrying", "args": {"type": "key"}},
+                                  {"name": "locked_door", "kind": "door_open", "args": {"locked": True}},
+                                  {"name": "goal", "kind": "goal"}]}
+    path = tmp_path / "unlock.yaml"
+    path.write_text(out[1])
+    assert main(["check-env", str(path), "--steps", "10"]) == 0
+
+
+@pytest.mark.parametrize("gym_id, names, actions", [
+    ("MiniGrid-KeyCorridorS3R1-v0", ["key", "ball", "locked_door", "door", "goal"],
+     ["left", "right", "forward", "pickup", "drop", "toggle"]),
+    ("MiniGrid-RedBlueDoors-6x6-v0", ["blue_door", "red_door", "goal"], ["left", "right", "forward", "toggle"]),
+    ("MiniGrid-GoToDoor-5x5-v0", ["door", "goal"], ["left", "right", "forward", "toggle", "done"]),
+    ("MiniGrid-Empty-5x5-v0", ["goal"], ["left", "right", "forward"]),
+])
+def test_a_draft_names_what_every_seeded_layout_has_and_the_actions_it_needs(gym_id, names, actions):
+    from hubsgo_ppl.envs.minigrid.draft import draft_catalogue
+
+    draft = draft_catalogue(gym_id)
+    assert [s["name"] for s in draft["subgoals"]] == names
+    assert draft["options"]["actions"] == actions
 
 
 @pytest.mark.parametrize("env_id, close", [("Foo-v0", None), ("MiniGrid-Unlok-v0", "MiniGrid-Unlock-v0")])
