@@ -183,8 +183,9 @@ def _catalogue_route(env: Any) -> str:
         draft = draft_catalogue(gym_id)
         task = draft["task"]
         return (f"{route}. A draft from its {PROBE_RESETS} seeded layouts (an object, door or goal they have, and "
-                f"the actions these need) to save as {task}.yaml, edit, and train with `hubsgo train {task}.yaml "
-                f"--graph independent` (or --model your spec, with your signed edges):\n\n{draft_text(draft)}")
+                f"the actions these need) to save as {task}.yaml, edit, and train with --model your spec (your signed "
+                f"edges); trained with --graph independent instead, `hubsgo review RUN` suggests the edges its "
+                f"successes support:\n\n{draft_text(draft)}")
     if not isinstance(env.action_space, gym.spaces.Discrete):
         return (f"its actions are {type(env.action_space).__name__}, and a Gymnasium environment of your own trains "
                 "on Discrete actions only (docs/own_env.md); the arm tasks' continuous control is the robosuite "
