@@ -411,7 +411,7 @@ def _build(cat: Catalogue) -> MazeSpec:
         raise _err(source, "options.layout", f"layout file {str(path)!r} " + ("is a directory" if path.is_dir()
                    else "not found") + "; give the path of a layout file relative to the catalogue's folder")
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")   # a BOM (Windows editors) is not a cell
     except UnicodeDecodeError as exc:
         raise SpecError(f"{path}: not UTF-8 text (byte {exc.start}); save the layout as UTF-8") from None
     lay = parse_layout(text, opts.legend, source=str(path))

@@ -204,3 +204,11 @@ def test_a_layout_in_a_folder_below_the_catalogue_is_read(tmp_path):
     (tmp_path / "layouts" / "small.txt").write_text("#####\n#A.G#\n#####\n")
     path = write_task(tmp_path, options="layout: layouts/./small.txt\n", subgoals="  - {name: goal, kind: goal}\n")
     assert load_maze_spec(path).layout.goal == (3, 1)
+
+
+@pytest.mark.parametrize("first", ["", "; a comment line first\n"])
+def test_a_layout_saved_with_a_byte_order_mark_reads_as_without(tmp_path, first):
+    path = write_task(tmp_path, layout="#####\n#A.G#\n#####\n", subgoals="  - {name: goal, kind: goal}\n")
+    (tmp_path / "mini.txt").write_bytes(("\ufeff" + first + "#####\n#A.G#\n#####\n").encode("utf-8"))
+    spec = load_maze_spec(path)
+    assert (spec.layout.width, spec.layout.height) == (5, 3)
