@@ -32,6 +32,16 @@ def cmd_tasks(args: argparse.Namespace) -> int:
     return 0
 
 
+def _drawn(name: str) -> str:
+    """What a maze draws at random at each reset: its start cell, its start direction, or both."""
+    from ..envs import get_task
+    from ..envs.minigrid.layout import load_maze_spec
+
+    opts = load_maze_spec(get_task(name).catalogue).options
+    what = [w for w, drawn in (("cell", opts.start == "room"), ("direction", opts.start_dir == "random")) if drawn]
+    return f"{' and '.join(what)} (drawn at random each episode)"
+
+
 def _check_task(name: str, info: Any, model: str | None) -> None:
     """What `hubsgo train` checks before a run, without training: the env's own checks (those of
     `hubsgo check-env`, which builds it as this does), a maze's reachability and optimum, and the
@@ -59,8 +69,7 @@ def _check_task(name: str, info: Any, model: str | None) -> None:
             print(f"    reachability: WARNING: no reachable state achieves {', '.join(never)}")
         else:
             low, high = optimal_steps_range(name)
-            shortest = (f"{low} steps" if low == high else
-                        f"{low}-{high} steps, by the start direction (drawn at random each episode)")
+            shortest = f"{low} steps" if low == high else f"{low}-{high} steps, by the start {_drawn(name)}"
             print(f"    reachability: the goal and every sub-goal can be reached; shortest solution {shortest}")
             from ..experiments.driver import max_steps_below_solution
 

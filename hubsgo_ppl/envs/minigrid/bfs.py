@@ -23,6 +23,7 @@ from ...specs import SpecError
 from ..subgoals import Catalogue
 from .cardinal import CARDINAL, is_cardinal, primitive, primitives
 from .layout import MazeSpec, MazeState, load_maze_spec
+from .starts import room_steps_range
 
 __all__ = ["plan", "plan_or_none", "optimal_steps", "optimal_return", "transition", "holds", "shortest_path_cells",
            "check_reachable"]
@@ -234,13 +235,12 @@ def optimal_steps(source: Any, start_dir: int | None = None) -> int:
 
 
 def optimal_steps_range(source: Any) -> tuple[int, int]:
-    """Fewest steps to the goal from the start, over every start direction the task can draw: ``(fewest,
-    most)``, equal where the start direction is fixed."""
-    _, starts, _ = _resolve(source, None)
-    if len(starts) == 1:
-        n = optimal_steps(source)
-        return n, n
-    steps = [optimal_steps(source, start_dir=d) for d in range(4)]
+    """Fewest steps to the goal over every start the task can draw (each start direction and, with
+    ``options.start: room``, each cell of the start room): ``(fewest, most)``, equal where it is fixed."""
+    spec, starts, _ = _resolve(source, None)
+    if spec.options.start == "room" and getattr(source, "unwrapped", None) is None:
+        return room_steps_range(spec, starts)
+    steps = [optimal_steps(source, start_dir=None if len(starts) == 1 else s.dir) for s in starts]
     return min(steps), max(steps)
 
 

@@ -485,3 +485,18 @@ def test_a_key_behind_its_own_door_keeps_the_key_hint(tmp_path):
     path = _user_task(tmp_path, behind, "[left, right, forward, pickup, toggle]")
     with pytest.raises(SpecError, match="key on the agent's side"):
         bfs.check_reachable(path)
+
+
+@pytest.mark.parametrize("start_dir", ["right", "random"])
+def test_steps_range_with_a_room_start_covers_every_cell_of_the_room(tmp_path, start_dir):
+    """With options.start: room the shortest solution depends on the cell drawn, not only the heading:
+    the range is every room cell's (and each drawn heading's), as a search from each start finds it."""
+    room = "#######\n#A...y#\n#.....#\n###Y###\n#....G#\n#######\n"
+    path = _user_task(tmp_path, room, start_dir=start_dir)
+    path.write_text(path.read_text().replace("  layout: u.txt", "  layout: u.txt\n  start: room"))
+    spec = load_maze_spec(path)
+    dirs = range(4) if start_dir == "random" else [0]
+    each = [len(bfs._bfs(spec, spec.initial_state(d)._replace(pos=cell), lambda s: s.pos == spec.layout.goal))
+            for cell in spec.layout.start_room() for d in dirs]
+    assert bfs.optimal_steps_range(path) == (min(each), max(each))
+    assert min(each) < bfs.optimal_steps(path, start_dir=0) < max(each)   # A is neither end of it
