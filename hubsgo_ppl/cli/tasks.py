@@ -124,6 +124,7 @@ def cmd_check_env(args: argparse.Namespace) -> int:
         problems = check_env(env, steps=args.steps, seed=args.seed)
         notes = env_notes(env) if not problems else []
         warnings = scene_warnings(env) if not problems else []
+        maze = _maze_warnings(env) if not problems else []
     finally:
         env.close()
     if route:       # a bare Gymnasium id: the catalogue that trains it
@@ -132,13 +133,29 @@ def cmd_check_env(args: argparse.Namespace) -> int:
         print(f"missing: {problem}")
     for note in notes:
         print(f"note: {note}")
-    for warning in warnings:
+    for warning in warnings + maze:
         print(f"warning: {warning}")
     if not problems:
         count = f"{len(warnings)} warning{'s' * (len(warnings) != 1)}"
         but = f"; but its scene cannot be solved as built ({count} above)" if warnings else ""
+        but += "; but see the reachability warning above" if maze else ""
         print(f"{args.env}: meets the sub-goal contract ({args.steps} steps, seed {args.seed}){but}")
-    return 1 if problems or warnings else 0
+    return 1 if problems or warnings or maze else 0
+
+
+def _maze_warnings(env: Any) -> list[str]:
+    """What makes a drawn maze unsolvable or a sub-goal unreachable, as `hubsgo tasks` and `train` check it."""
+    spec = getattr(env.unwrapped, "spec_maze", None)
+    if spec is None:
+        return []
+    from ..envs.minigrid.bfs import check_reachable
+    from ..specs import SpecError
+
+    try:
+        never = check_reachable(spec)
+    except SpecError as err:
+        return [str(err)]
+    return [f"no state the agent can reach achieves {', '.join(never)}"] if never else []
 
 
 def _gym_env(env_id: str, unknown: Exception) -> Any:

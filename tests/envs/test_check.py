@@ -150,3 +150,23 @@ def test_an_id_that_is_not_registered_says_so(capsys, env_id, close):
     assert len(err) == 1 and f"{env_id!r} is not a registered Gymnasium id" in err[0], err
     assert "is a Gymnasium id, not a task" not in err[0]
     assert (close in err[0]) if close else "close:" not in err[0]
+
+
+@pytest.mark.parametrize("layout, said", [
+    ("#####\n#A..#\n#####\n#..G#\n#####\n", "the goal (3, 3) cannot be reached"),
+    ("#######\n#A....#\n#.#Y###\n#....G#\n#######\n", "no state the agent can reach achieves door"),
+])
+def test_a_drawn_maze_that_tasks_refuses_or_warns_of_is_not_passed_silently(capsys, tmp_path, layout, said):
+    """check-env plays a maze whose goal no action sequence reaches (or whose sub-goal none achieves)
+    without fault; it says what `hubsgo tasks` and `train` say of it, and exits 1."""
+    (tmp_path / "m.txt").write_text(layout)
+    cat = tmp_path / "m.yaml"
+    cat.write_text("task: m\nfamily: minigrid\noptions:\n  layout: m.txt\n  legend: {Y: {type: door, color: yellow,"
+                   " locked: true}}\nsubgoals:\n  - {name: door, kind: door_open, args: {color: yellow}}\n"
+                   "  - {name: goal, kind: goal}\n")
+    if "Y" not in layout:
+        cat.write_text(cat.read_text().replace("  - {name: door, kind: door_open, args: {color: yellow}}\n", "")
+                       .replace("  legend: {Y: {type: door, color: yellow, locked: true}}\n", ""))
+    assert main(["check-env", str(cat), "--steps", "10"]) == 1
+    out = capsys.readouterr().out
+    assert said in out and "but see the reachability warning above" in out
