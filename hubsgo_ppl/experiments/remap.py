@@ -185,9 +185,11 @@ def remap_critic_state(old: dict[str, Any], fresh_critic: Any, keep_run: bool = 
 
     state = dict(fresh)
     state["theta"], state["coupling"] = theta, coupling
+    same_q = old_names == new_names and not (new_edges or dropped_edges or resigned)
     for key in ("chains", "last_samples"):
         src, dst = old.get(key), fresh.get(key)
-        if key == "last_samples" and (not keep_run or src is None):
+        # the last update's samples stand for q (its marginals above exact_max_n); a changed q has none yet
+        if key == "last_samples" and (not keep_run or src is None or not same_q):
             state[key] = None
             continue
         base = dst if dst is not None else fresh["chains"]
