@@ -297,10 +297,11 @@ def parse_layout(text: str, legend: dict[str, LegendEntry], source: str = "<layo
                 goals.append(cell)
             elif t in ("key", "ball", "door"):
                 objects.append(MazeObject(t, entry.color, cell, entry.locked, entry.open))
-    if len(agents) != 1:
-        raise SpecError(f"{source}: found {len(agents)} agent starts 'A' at {agents}; draw exactly one")
-    if len(goals) != 1:
-        raise SpecError(f"{source}: found {len(goals)} goals 'G' at {goals}; draw exactly one")
+    for what, found in (("agent starts 'A'", agents), ("goals", goals)):     # a legend goal is not drawn 'G'
+        if len(found) != 1:
+            at = " and ".join(f"line {rows[y][0]}, column {x + 1} ({rows[y][1][x]!r}, cell [{x}, {y}])"
+                              for x, y in found)
+            raise SpecError(f"{source}: found {len(found)} {what}{' at ' + at if at else ''}; draw exactly one")
     return Layout(width, height, frozenset(walls), frozenset(lava), agents[0], goals[0],
                   tuple(objects), tuple(r for _, r in rows))
 

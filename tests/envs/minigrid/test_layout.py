@@ -212,3 +212,12 @@ def test_a_layout_saved_with_a_byte_order_mark_reads_as_without(tmp_path, first)
     (tmp_path / "mini.txt").write_bytes(("\ufeff" + first + "#####\n#A.G#\n#####\n").encode("utf-8"))
     spec = load_maze_spec(path)
     assert (spec.layout.width, spec.layout.height) == (5, 3)
+
+
+def test_two_starts_or_goals_are_named_by_line_and_column_and_a_legend_goal_by_its_character():
+    with pytest.raises(SpecError, match=r"found 2 agent starts 'A' at line 3, column 2 \('A', cell \[1, 1\]\) and "
+                                        r"line 4, column 4 \('A', cell \[3, 2\]\)"):
+        parse_layout("; comment\n#####\n#A..#\n#..A#\n#..G#\n#####\n", {})
+    with pytest.raises(SpecError, match=r"found 2 goals at line 2, column 4 \('g', cell \[3, 1\]\) and line 4, "
+                                        r"column 4 \('G', cell \[3, 3\]\)"):
+        parse_layout("#####\n#A.g#\n#...#\n#..G#\n#####\n", {"g": LegendEntry(type="goal")})
