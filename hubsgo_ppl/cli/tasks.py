@@ -32,6 +32,23 @@ def cmd_tasks(args: argparse.Namespace) -> int:
     return 0
 
 
+def _print_shortest(name: str, optimal_steps_range: Any) -> None:
+    """The shortest solution of a maze every sub-goal of which can be reached, and a max_steps below it."""
+    from ..experiments.driver import max_steps_below_solution
+
+    try:
+        low, high = optimal_steps_range(name)
+    except RuntimeError:    # the search for it passed its cap of states (a large maze with drop, say)
+        print("    reachability: the goal and every sub-goal can be reached; the shortest solution has too many "
+              "states to find exactly")
+        return
+    shortest = f"{low} steps" if low == high else f"{low}-{high} steps, by the start {_drawn(name)}"
+    print(f"    reachability: the goal and every sub-goal can be reached; shortest solution {shortest}")
+    short = max_steps_below_solution(name)
+    if short:
+        print(f"    reachability: WARNING: {short}")
+
+
 def _drawn(name: str) -> str:
     """What a maze draws at random at each reset: its start cell, its start direction, or both."""
     from ..envs import get_task
@@ -68,14 +85,7 @@ def _check_task(name: str, info: Any, model: str | None) -> None:
         elif never:
             print(f"    reachability: WARNING: no reachable state achieves {', '.join(never)}")
         else:
-            low, high = optimal_steps_range(name)
-            shortest = f"{low} steps" if low == high else f"{low}-{high} steps, by the start {_drawn(name)}"
-            print(f"    reachability: the goal and every sub-goal can be reached; shortest solution {shortest}")
-            from ..experiments.driver import max_steps_below_solution
-
-            short = max_steps_below_solution(name)
-            if short:
-                print(f"    reachability: WARNING: {short}")
+            _print_shortest(name, optimal_steps_range)
     from ..specs import list_model_specs
 
     if model is None and f"{info.name}-specific" not in list_model_specs():
