@@ -86,6 +86,13 @@ def _check_task(name: str, info: Any, model: str | None) -> None:
             print(f"    reachability: WARNING: no reachable state achieves {', '.join(never)}")
         else:
             _print_shortest(name, optimal_steps_range)
+    if info.family == "robosuite":
+        from ..experiments.resolve import horizon_below_option
+
+        with contextlib.redirect_stderr(io.StringIO()):     # the budget note comes with the critic spec's lines
+            short = horizon_below_option(resolve(RunConfig(task=name, agent="hdqn")))
+        if short:
+            print(f"    horizon: WARNING: {short}")
     from ..specs import list_model_specs
 
     if model is None and f"{info.name}-specific" not in list_model_specs():

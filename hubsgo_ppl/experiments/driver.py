@@ -29,7 +29,8 @@ from .restore import build_run, restore
 from .io import RunFileError, is_temp_file, truncate_csv, write_yaml
 from .lock import LOCK_FILE, run_folder_lock
 from .logger import CSVOutput, Logger, TensorBoardOutput, read_csv_rows
-from .resolve import check_catalogue, is_catalogue, note_unlinked_goals, resolve_run, warn_goals_left_out
+from .resolve import (check_catalogue, horizon_below_option, is_catalogue, note_unlinked_goals, resolve_run,
+                      warn_goals_left_out)
 from .resolved import CHECKPOINT_STEPS, ResolvedRun, RunConfig, RunError
 
 __all__ = ["train"]
@@ -281,6 +282,9 @@ def _new(run: ResolvedRun, out: Path, cfg: RunConfig | None, started: bool, resu
             short = max_steps_below_solution(run.task_ref, (run.hyper.get("env") or {}).get("max_steps"))
             if short:
                 print(f"hubsgo: warning: {cfg.task}: {short}", file=sys.stderr)
+    short = horizon_below_option(run) if not resumed else None
+    if short:
+        print(f"hubsgo: warning: {cfg.task if cfg else run.task}: {short}", file=sys.stderr)
     if run.family == "robosuite" and is_catalogue(run.task_ref) and not resumed and not get_task(run.task_ref).shipped:
         from ..envs import make
         from ..envs.check import scene_warnings

@@ -23,7 +23,7 @@ from .resolved import ResolvedRun, RunConfig, RunError, as_resolved
 BUDGET_NOTE = "hubsgo: note: no --steps: "
 
 __all__ = ["resolve", "resolve_run", "task_ref", "catalogue_digest", "check_catalogue", "is_catalogue", "task_goals",
-           "warn_goals_left_out", "note_unlinked_goals", "env_keys"]
+           "warn_goals_left_out", "note_unlinked_goals", "env_keys", "horizon_below_option"]
 
 #: MiniGridEnv's arguments that a layout maze sets itself (its size, mission and occlusion)
 _MAZE_SETS = {"self", "catalogue", "mission_space", "grid_size", "width", "height", "see_through_walls"}
@@ -129,6 +129,25 @@ def _episode_budget(info: Any, hyper: Mapping[str, Any]) -> tuple[int, int] | No
 
     horizon = hyper.get("env", {}).get("horizon", info.catalogue.options.get("horizon", DEFAULT_HORIZON))
     return int(episodes), int(horizon)
+
+
+def horizon_below_option(run: ResolvedRun | Mapping[str, Any]) -> str | None:
+    """What to say where an arm task's horizon (``--set env.horizon``, else the catalogue's, else the
+    scene's default) is shorter than one option of the hierarchical agents (``loop.option_steps``, the
+    control steps the low level is given for one sub-goal); None otherwise."""
+    run = as_resolved(run)
+    if run.family != "robosuite" or run.agent not in HIERARCHICAL:
+        return None
+    from ..envs.robosuite.options import DEFAULT_HORIZON
+
+    options = get_task(run.task_ref).catalogue.options
+    horizon = int(run.section("env").get("horizon", options.get("horizon", DEFAULT_HORIZON)))
+    option = int(run.section("loop").get("option_steps", 0))
+    if horizon >= option:
+        return None
+    return (f"horizon {horizon} is shorter than one option (loop.option_steps {option} control steps, what the "
+            f"{run.low_level} low level is given for one sub-goal), so an episode ends before most sub-goals can be "
+            f"reached and few or none succeed; raise options.horizon (or --set env.horizon) to {option} or more")
 
 
 # a flat baseline's preset section -> the actions it takes (a family without the section has the other kind)
