@@ -285,7 +285,10 @@ def _new(run: ResolvedRun, out: Path, cfg: RunConfig | None, started: bool, resu
     short = horizon_below_option(run) if not resumed else None
     if short:
         print(f"hubsgo: warning: {cfg.task if cfg else run.task}: {short}", file=sys.stderr)
-    if run.family == "robosuite" and is_catalogue(run.task_ref) and not resumed and not get_task(run.task_ref).shipped:
+    # a scene of one's own, or a shipped one changed by --set env.KEY (the shipped scenes as they are have none)
+    changed = cfg is not None and any(o.split("=", 1)[0].strip().startswith("env.") for o in cfg.overrides)
+    own = is_catalogue(run.task_ref) and not get_task(run.task_ref).shipped
+    if run.family == "robosuite" and not resumed and (own or changed):
         from ..envs import make
         from ..envs.check import scene_warnings
 

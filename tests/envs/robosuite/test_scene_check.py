@@ -66,3 +66,10 @@ def test_train_warns_of_an_unsolvable_scene_of_ones_own_before_it_trains(tmp_pat
                  "--no-progress"]) == 0
     err = capsys.readouterr().err
     assert "hubsgo: warning: " in err and "lies 9.90 m from the arm's base, which reaches at most" in err, err
+
+
+def test_train_warns_of_a_shipped_scene_that_set_env_makes_unsolvable(tmp_path, capsys):
+    assert main(["train", "push_any_one", "--agent", "hdqn", "--steps", "20", "--set", "env.travel_clearance=10",
+                 "--out", str(tmp_path / "run"), "--no-progress"]) == 0
+    err = capsys.readouterr().err
+    assert "hubsgo: warning: push_any_one: the target of " in err and "which reaches at most" in err, err
