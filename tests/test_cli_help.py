@@ -66,3 +66,11 @@ def test_read_outs_refuse_an_unwritable_destination_before_any_work(tmp_path, ca
         err = capsys.readouterr().err.strip().splitlines()
         assert err == [f"hubsgo: error: {run}: cannot write here (Read-only file system; the default is {default}); "
                        "give --out, a place you can write"], err
+
+
+def test_the_seeds_help_says_which_runs_train_in_lockstep_and_which_one_after_another():
+    train = _commands()["train"]
+    helps = {a.option_strings[0]: " ".join(a.help.split()) for a in train._actions if a.option_strings}
+    assert "learned low level of a task with discrete actions" in helps["--seeds"]
+    assert "other runs (arm tasks, baselines) one seed after another" in helps["--seeds"]
+    assert "lockstep" not in helps["--workers"]      # a worker trains its share as --seeds does, in lockstep or not

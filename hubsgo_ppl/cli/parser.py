@@ -61,12 +61,13 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--steps", type=int, help="environment-step budget (default: per task family)")
     t.add_argument("--seed", type=_seed, help="seed of every random stream of the run, 0 or more (default 0)")
     t.add_argument("--seeds", type=_seed, nargs="+", metavar="SEED",
-                   help="train several seeds in one process: hubsgo and hdqn with the learned low level of a grid "
-                        "task in lockstep (their networks updated together), other runs one seed after another; each "
-                        "seed's run goes to OUT/seedK with --out, else to runs/TASK-AGENT-sSEED")
+                   help="train several seeds in one process: hubsgo and hdqn with the learned low level of a task "
+                        "with discrete actions (a maze, MiniGrid, an env of your own) in lockstep (their networks "
+                        "updated together), other runs (arm tasks, baselines) one seed after another; each seed's "
+                        "run goes to OUT/seedK with --out, else to runs/TASK-AGENT-sSEED")
     t.add_argument("--workers", type=int, default=1, metavar="N",
                    help="with --seeds: processes (one CPU each) that share the seeds, each training its share "
-                        "in lockstep (default 1; 5 seeds on 2 workers train as 3 and 2)")
+                        "as --seeds does (default 1; 5 seeds on 2 workers train as 3 and 2)")
     t.add_argument("--out", help="run directory (default runs/TASK-AGENT-sSEED)")
     t.add_argument("--resume", action="store_true", help="continue the run in --out from its checkpoint")
     t.add_argument("--low-level", choices=["learned", "scripted"], help="low level (default: per family)")
