@@ -969,3 +969,22 @@ def test_a_stop_at_that_could_not_pause_the_run_is_refused(tmp_path, capsys):
     assert (run / "metrics.csv").read_bytes() == metrics
     assert main([*start, "--resume", "--steps", "600", "--stop-at", "450"]) == 0       # inside a raised budget
     assert torch.load(run / "checkpoint.pt", weights_only=False)["env_steps"] >= 450
+
+
+def test_a_fully_connected_critic_without_a_spec_of_ones_own_says_it_has_no_edges(tmp_path, capsys):
+    """--graph fully_connected on a catalogue without a spec: every pair has a coupling, none an edge of
+    the user's; a critic that never updated says its sets are the prior's alone, in train and subgoals."""
+    import yaml
+
+    (tmp_path / "m.txt").write_text("#######\n#A....#\n#....G#\n#######\n")
+    (tmp_path / "m.yaml").write_text(yaml.safe_dump({
+        "task": "m", "family": "minigrid", "options": {"layout": "m.txt", "max_steps": 3},     # no episode succeeds
+        "subgoals": [{"name": "goal", "kind": "goal"}, {"name": "right", "kind": "at", "args": {"cell": [5, 1]}}]}))
+    run = tmp_path / "run"
+    assert main(["train", str(tmp_path / "m.yaml"), "--graph", "fully_connected", "--steps", "12", "--out", str(run),
+                 "--no-progress"]) == 0
+    assert json.loads((run / "subgoals.json").read_text())["spec_edges"] == 0
+    said = "these sets are its prior's (the spec has no edges, so the prior alone)"
+    assert said in capsys.readouterr().out.strip().splitlines()[-1]
+    assert main(["subgoals", str(run)]) == 0
+    assert said in capsys.readouterr().out.strip().splitlines()[-1]

@@ -36,9 +36,10 @@ def _never_updated(table: dict[str, Any]) -> str:
     ``subgoals.json``; a file written without them gets both reasons)."""
     successes, starts = table.get("successes"), table.get("critic_starts") or {}
     source = table.get("critic_from")
-    # what the prior's sets rest on: the spec's edges, or the prior alone where it has none (independent)
-    alone = ("the spec has no edges, so the prior alone" if table.get("factors", {}).get("pairwise") == {}
-             else "your edges alone")
+    # what the prior's sets rest on: the spec's edges, or the prior alone where it has none (independent, or
+    # fully_connected without a spec of one's own, whose couplings start where the prior puts them)
+    edgeless = table.get("spec_edges") == 0 or table.get("factors", {}).get("pairwise") == {}
+    alone = "the spec has no edges, so the prior alone" if edgeless else "your edges alone"
     if source:
         return (f"the critic never updated in this run: these sets are those of the critic transferred from "
                 f"{source} (--init-from), not your edges alone; {_TRAIN_LONGER}")

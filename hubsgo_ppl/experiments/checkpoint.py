@@ -163,13 +163,17 @@ def g_star_table(agent: Any, names: list[str], run_dir: str | Path, num_samples:
     critic that never updated did not: ``successes`` (the run's successful training episodes) and
     ``critic_starts`` (``transitions``: the high level's stored transitions at the critic's first
     update, its ``learning_starts`` or ``batch_size`` and then ``loop.critic_every`` minibatches;
-    ``stored``: those it holds), and ``critic_from`` (the run an ``--init-from`` critic came from)."""
+    ``stored``: those it holds), ``critic_from`` (the run an ``--init-from`` critic came from) and
+    ``spec_edges`` (the edges of the run's spec: none under ``--graph independent`` or ``fully_connected``
+    without a spec of one's own)."""
     table = subgoal_table(agent.g_star_critic(), names, num_samples)
     successes = training_successes(run_dir)
     if successes is not None:
         table["successes"] = successes
     run = recorded_run(Path(run_dir))
     init = (run.init_from or {}) if run is not None else {}
+    if run is not None and run.model_spec is not None:      # none: a critic without edges of the user's
+        table["spec_edges"] = len(run.model_spec.get("edges") or [])
     if "critic" in (init.get("parts") or ()):       # G* of a critic that never updated here is the source run's
         table["critic_from"] = str(init.get("run"))
     high, cfg = getattr(agent, "high", None), getattr(agent, "cfg", None)
