@@ -140,7 +140,7 @@ def cmd_check_env(args: argparse.Namespace) -> int:
     try:
         problems = check_env(env, steps=args.steps, seed=args.seed)
         notes = env_notes(env) if not problems else []
-        warnings = scene_warnings(env) if not problems else []
+        warnings = scene_warnings(env, args.seed) if not problems else []
         maze = _maze_warnings(env) if not problems else []
     finally:
         env.close()

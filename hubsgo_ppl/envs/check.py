@@ -157,8 +157,8 @@ def env_notes(env: gym.Env) -> list[str]:
     return notes
 
 
-def scene_warnings(env: gym.Env) -> list[str]:
+def scene_warnings(env: gym.Env, seed: int = 0) -> list[str]:
     """What the env's scene makes impossible, where it can tell (an arm scene: objects off the table,
-    targets out of the arm's reach); resets the env."""
+    targets out of the arm's reach, at its seeded starts from ``seed`` on); resets the env."""
     scene = getattr(env.unwrapped, "scene_problems", None)
-    return list(scene()) if callable(scene) else []
+    return list(scene(seed=seed)) if callable(scene) else []

@@ -294,7 +294,7 @@ def _new(run: ResolvedRun, out: Path, cfg: RunConfig | None, started: bool, resu
 
         env = make(run.task_ref, **run.section("env"))      # a scene of its own, so training's starts untouched
         try:
-            for warning in scene_warnings(env):
+            for warning in scene_warnings(env, run.seed):
                 print(f"hubsgo: warning: {cfg.task if cfg else run.task}: {warning}", file=sys.stderr)
         finally:
             env.close()

@@ -19,7 +19,7 @@ from .base import SubgoalManipulationEnv
 from .collect_three_balls import CollectThreeBalls
 from .options import positive_options, scene_options
 from .push_any_one import PushAnyOne
-from .scene_check import scene_problems
+from .scene_check import SCENE_RESETS, scene_problems
 from .stack_cubes import StackCubes
 
 __all__ = ["TASK_CLASSES", "RobosuiteTaskEnv", "make_robosuite_task"]
@@ -69,11 +69,22 @@ class RobosuiteTaskEnv(gym.Env):
     def horizon(self) -> int:
         return self.task.horizon
 
-    def scene_problems(self, seed: int = 0) -> list[str]:
-        """What the scene makes impossible after ``reset(seed=seed)``: objects off the table, targets out of
-        the arm's reach (:mod:`.scene_check`); resets the env."""
-        self.reset(seed=seed)
-        return scene_problems(self.task)
+    def scene_problems(self, seed: int = 0, resets: int = SCENE_RESETS) -> list[str]:
+        """What the scene makes impossible after ``reset(seed=s)``, for the ``resets`` seeds from ``seed`` on
+        (each start draws its own placement): objects off the table, targets out of the arm's reach
+        (:mod:`.scene_check`), those of the first start that has any; resets the env."""
+        found = {}
+        for s in range(seed, seed + resets):
+            self.reset(seed=s)
+            problems = scene_problems(self.task)
+            if problems:
+                found[s] = problems
+        if not found:
+            return []
+        first, last = min(found), seed + resets - 1
+        starts = f"the start of seed {first}" + (f"; {len(found)} of the {resets} starts of seeds {seed}-{last} have "
+                                                 "a problem" if resets > 1 else "")
+        return [f"{problem} ({starts})" for problem in found[first]]
 
     # ---------------------------------------------------------------- gymnasium API
     def _flat(self, obs: dict) -> np.ndarray:

@@ -13,7 +13,11 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["arm_reach", "scene_problems"]
+__all__ = ["SCENE_RESETS", "arm_reach", "scene_problems"]
+
+#: the seeded starts a scene is checked on: each draws its own placement, and a table too small for the
+#: placements puts an object off it at some starts only
+SCENE_RESETS = 10
 
 #: how far past the table's edge an object's centre may start (metres): half a small object's width
 EDGE_SLACK = 0.01

@@ -73,3 +73,15 @@ def test_train_warns_of_a_shipped_scene_that_set_env_makes_unsolvable(tmp_path, 
                  "--out", str(tmp_path / "run"), "--no-progress"]) == 0
     err = capsys.readouterr().err
     assert "hubsgo: warning: push_any_one: the target of " in err and "which reaches at most" in err, err
+
+
+def test_a_table_too_small_for_some_placements_is_found_at_a_later_seeded_start(catalogue):
+    # on a 30 cm table PushAnyOne's placement puts a cube off it at some starts: not at seed 1's, at seed 5's
+    env = make_robosuite_task(catalogue("push_any_one"), table_full_size=[0.3, 0.3, 0.05])
+    try:
+        assert env.scene_problems(seed=1, resets=1) == []
+        problems = env.scene_problems(seed=1)
+        assert len(problems) == 1 and "off a table of 0.3 x 0.3 m" in problems[0], problems
+        assert problems[0].endswith("(the start of seed 5; 4 of the 10 starts of seeds 1-10 have a problem)"), problems
+    finally:
+        env.close()
