@@ -25,7 +25,8 @@ Re-running a sweep skips finished runs (checkpoint ``env_steps`` ≥ budget), re
 from their checkpoint, and retries a crashed run once before reporting it as failed. A run folder is
 resumed or started afresh by ``train`` itself, with its guards: only the files ``train`` writes
 (``RUN_FILES``) are removed, a folder whose logs show a lost checkpoint is refused, and a refused run
-is reported in one line without a retry. A sweep's ``name`` is a plain folder name, so that its
+is reported in one line without a retry. A grid whose folders hold runs trained with other settings (a sweep file
+edited between calls) is refused before any run starts (:func:`check_recorded`). A sweep's ``name`` is a plain folder name, so that its
 default folder ``runs/sweeps/NAME`` stays under ``runs/sweeps``.
 """
 
@@ -254,6 +255,62 @@ def check_jobs(jobs: list[Job], path: Path) -> None:
         job.lockstep = seen[key]
 
 
+#: run config keys that may differ within a cell, or between a run and its grid: they do not change what it learns
+_FREE = ("seed", "versions", "checkpoint_steps", "history_every", "threads")
+
+
+def _differs(a: Any, b: Any, where: str = "") -> str | None:
+    """The first dotted key where two plain configs differ, or None where they are equal."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        for k in [*a, *(k for k in b if k not in a)]:
+            found = _differs(a.get(k), b.get(k), f"{where}.{k}" if where else str(k))
+            if found:
+                return found
+        return None
+    return None if a == b else where
+
+
+def _settings(cfg: dict[str, Any]) -> dict[str, Any]:
+    """A run's config without what may differ in a cell: the seed, the budget (``--steps`` moves it)."""
+    out = {k: v for k, v in cfg.items() if k not in _FREE}
+    out["hyper"] = {k: v for k, v in (out.get("hyper") or {}).items() if k != "steps"}
+    return out
+
+
+def check_recorded(jobs: list[Job], path: Path) -> None:
+    """Refuse in one line, before any run starts, a grid whose folders hold runs trained with other settings
+    than the grid now gives them (a sweep file edited between calls): a finished run would be skipped and an
+    interrupted one resumed as recorded, so a cell would mix two settings. A moved budget is refused only for a
+    run already past it (an interrupted run resumes at the new budget, as ``train --resume --steps`` does)."""
+    from .checkpoint import run_config
+    from .run import resolve_run
+
+    wanted: dict[str, dict[str, Any]] = {}
+    clash = []
+    for job in jobs:
+        out = Path(job.out)
+        if not (out / CHECKPOINT).is_file() and not (out / "config.yaml").is_file():
+            continue
+        try:
+            cfg = run_config(out)
+            have, budget = _settings(cfg), (cfg.get("hyper") or {}).get("steps")
+        except (RunError, OSError, ValueError, AttributeError):
+            continue            # damaged or missing: train() says so for this run
+        key = repr({k: v for k, v in job.config.items() if k != "seed"})
+        if key not in wanted:
+            wanted[key] = _settings(resolve_run(RunConfig(**job.config)).to_dict())
+        where = _differs(have, wanted[key])
+        if where:
+            clash.append(f"{job.run_id} ({where})")
+        elif run_status(job) == "finished" and budget != job.budget:
+            clash.append(f"{job.run_id} (trained at a budget of {budget:,}, and past this grid's {job.budget:,})")
+    if clash:
+        raise SpecError(f"{path}: {len(clash)} run(s) in {Path(jobs[0].out).parent.parent.parent} were trained with "
+                        f"other settings than this grid gives them, so their cells would mix two settings: "
+                        f"{', '.join(clash[:3])}{', ...' if len(clash) > 3 else ''}; restore the sweep file as it was, "
+                        "or run the edited grid into another --out")
+
+
 def run_status(job: Job) -> str:
     """``"finished"`` (checkpoint at or past the budget), ``"partial"`` (a checkpoint short of it) or ``"new"``."""
     if not (Path(job.out) / CHECKPOINT).is_file():
@@ -302,6 +359,7 @@ def run_sweep(sweep: str | Path, backend: str = "local", workers: int = 2, out: 
         raise SpecError(f"{path}: no run left: the variants {', '.join(v.name for v in part.variants)} run on none "
                         f"of the tasks {', '.join(t.name for t in part.tasks)}; choose rows and columns that meet")
     check_jobs(jobs, path)           # a misspelled spec or setting stops the sweep before any run starts
+    check_recorded(jobs, path)       # an edited grid stops it too, rather than mix two settings in a cell
     sweep_dir.mkdir(parents=True, exist_ok=True)
     write_yaml(sweep_dir / "sweep.yaml", {**spec.model_dump(mode="json"), "source": str(path)})
     status = {j.run_id: run_status(j) for j in jobs}

@@ -335,3 +335,24 @@ def test_a_sweep_or_report_folder_that_is_a_file_is_named_so(tmp_path, capsys, w
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 2 and all(f"{out}: a file where a folder goes" in line for line in err), err
     assert (tmp_path / "file").read_text() == "mine"
+
+
+def test_a_grid_edited_between_calls_is_refused_rather_than_mix_two_settings_in_a_cell(tmp_path):
+    path = _write(tmp_path)
+    out = tmp_path / "sweep"
+    assert run_sweep(path, workers=1, out=out, progress=False)["finished"] == 1
+    first = _rows(out / "fourroom/hdqn/seed0")
+    # another setting for the column, and a new seed that would train under it beside the old one
+    _write(tmp_path, seeds=[0, 1], tasks=[{"name": "fourroom", "steps": 1, "overrides": ["loop.option_steps=5"]}])
+    with pytest.raises(SpecError, match=r"fourroom/hdqn/seed0 \(hyper.loop.option_steps\).*another --out"):
+        run_sweep(path, workers=1, out=out, progress=False)
+    assert not (out / "fourroom/hdqn/seed1").exists() and _rows(out / "fourroom/hdqn/seed0") == first
+    # a budget the finished run has already passed cannot move: it would be skipped at its old one
+    _write(tmp_path, seeds=[0, 1], tasks=[{"name": "fourroom", "steps": 2}])
+    with pytest.raises(SpecError, match="trained at a budget of 1, and past this grid's 2"):
+        run_sweep(path, workers=1, out=out, progress=False)
+    assert not (out / "fourroom/hdqn/seed1").exists()
+    # the grid as it was, with a seed added (and other checkpoints): the new seed runs, the old is skipped
+    _write(tmp_path, seeds=[0, 1], checkpoint_steps=5)
+    result = run_sweep(path, workers=1, out=out, progress=False)
+    assert (result["finished"], result["skipped"]) == (1, 1)
