@@ -25,7 +25,7 @@ from ..errors import RunInterrupted
 from .callbacks import Callback, CallbackList, TrainingRun, default_callbacks
 from .checkpoint import (CHECKPOINT, EPISODE_LOGS, RUN_FILES, check_episode_log, read_checkpoint, read_config_file,
                          recorded_run)
-from .restore import build_run, restore
+from .restore import build_run, check_resume, restore
 from .io import RunFileError, is_temp_file, truncate_csv, write_yaml
 from .lock import LOCK_FILE, run_folder_lock
 from .logger import CSVOutput, Logger, TensorBoardOutput, read_csv_rows
@@ -47,7 +47,9 @@ def train(cfg: RunConfig, out: str | Path, resume: bool = False, progress: bool 
     pause after the episode that reaches this env step (a checkpoint is written; the schedules still run
     over the whole budget), e.g. to review the critic and revise its spec (``hubsgo revise``) before
     continuing with ``resume``. ``max_episodes`` stops after that many episodes of this call;
-    ``on_episode(stats)`` is called after each episode. The folder is locked while ``train`` runs;
+    ``on_episode(stats)`` is called after each episode. With ``resume``, the run continues as recorded: a
+    ``cfg`` field set away from its default (another task, agent, seed, spec, ``overrides``) that would change
+    it is refused, as ``hubsgo train --resume`` refuses such flags. The folder is locked while ``train`` runs;
     whatever happens, the env, the progress bar and the log files are closed on return."""
     out = Path(out)
     if stop_at is not None and int(stop_at) <= 0:
@@ -58,6 +60,10 @@ def train(cfg: RunConfig, out: str | Path, resume: bool = False, progress: bool 
         raise RunError(f"callbacks must be Callback objects (hubsgo_ppl.experiments.Callback); got {', '.join(bad)}")
     if isinstance(cfg.threads, bool) or not isinstance(cfg.threads, int) or cfg.threads <= 0:
         raise RunError(f"threads must be a positive whole number, got {cfg.threads!r}")
+    if resume:      # what cfg sets away from its defaults must be the run's own, as with `hubsgo train --resume`
+        check_resume(out, cfg.task, agent=None if cfg.agent == "hubsgo" else cfg.agent, seed=cfg.seed or None,
+                     model=cfg.model, graph=cfg.graph, low_level=cfg.low_level, overrides=cfg.overrides,
+                     init_from=cfg.init_from)
     where = {"phase": "start", "task": str(cfg.task)}
     try:
         torch.set_num_threads(cfg.threads)     # before anything is built, as in a sweep worker

@@ -180,3 +180,17 @@ def test_a_run_is_neither_trained_over_the_seed_folders_of_another_nor_inside_a_
         train(_cfg(steps=200), tmp_path / "runs" / "seed0" / "seed1", progress=False)
     assert sorted(p.name for p in (tmp_path / "runs").iterdir()) == before
     assert not (tmp_path / "runs" / "seed0" / "seed1").exists()
+
+
+def test_a_python_resume_refuses_a_config_that_names_another_run_and_takes_its_defaults_as_the_runs_own(tmp_path):
+    out = tmp_path / "run"
+    train(RunConfig(task="fourroom", agent="hdqn", seed=3, steps=1500, checkpoint_steps=500), out, progress=False,
+          stop_at=500)
+    before = _rows(out)
+    for other in (RunConfig(task="keydoor", agent="hdqn"), RunConfig(task="fourroom", agent="hdqn", seed=4),
+                  RunConfig(task="fourroom", agent="hdqn", overrides=["loop.option_steps=5"])):
+        with pytest.raises(RunError, match="continues the run as it was recorded"):
+            train(other, out, resume=True, progress=False)
+    assert _rows(out) == before
+    summary = train(RunConfig(task="fourroom", agent="hdqn"), out, resume=True, progress=False)
+    assert summary["finished"] and yaml.safe_load((out / "config.yaml").read_text())["seed"] == 3
