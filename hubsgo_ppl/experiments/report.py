@@ -62,6 +62,7 @@ class RunSummary:
     g_star: tuple[str, ...] | None = None   # the most probable set of subgoals.json, where the run has one
     budget: int | None = None               # the env-step budget its config.yaml records (None: no config.yaml)
     spent: int | None = None                # env steps its checkpoint records (None: none readable)
+    settings: str | None = None             # what it trained with but for seed and budget (sweep.settings_key)
 
     @property
     def done(self) -> int:
@@ -137,8 +138,9 @@ def _layout(sweep_dir: Path) -> tuple[list[str], list[str], dict[str, str], str 
 
 def collect(sweep_dir: str | Path) -> list[RunSummary]:
     """Every run with a non-empty ``metrics.csv`` under ``SWEEP_DIR/<task>/<variant>/seed<k>``."""
-    sweep_dir = Path(sweep_dir)
-    out = []
+    from .sweep import settings_key
+
+    sweep_dir, out = Path(sweep_dir), []
     for metrics in sorted(sweep_dir.glob("*/*/seed*/metrics.csv")):
         run = metrics.parent
         rows = read_csv_rows(metrics)     # a file that is no CSV log: RunFileError, one line
@@ -156,7 +158,7 @@ def collect(sweep_dir: str | Path) -> list[RunSummary]:
         tail = rets[-max(1, len(rets) // 10):]
         out.append(RunSummary(run.parent.parent.name, run.parent.name, seed, len(rows), int(steps[-1]),
                               float(rets.mean()), float(tail.mean()), float(succ.mean()), steps, rets, succ,
-                              _g_star(run), _budget(run), checkpoint_env_steps(run)))
+                              _g_star(run), _budget(run), checkpoint_env_steps(run), settings_key(run)))
     return out
 
 
@@ -358,12 +360,15 @@ def write_report(sweep_dir: str | Path, out: str | Path | None = None, bins: int
         empty = _nothing_logged(sweep_dir, runs, (tasks, variants, spec.seeds))
         grid = {(column_folder(t.name), v.name): v.steps or t.steps for t in spec.tasks for v in spec.variants}
         runs, other = _split_budgets(runs, grid)
+    from .sweep import split_settings
+
     unfinished = [r for r in runs if not r.finished]     # a sweep still running, or stopped: not in the tables
     runs = [r for r in runs if r.finished]
     if sweep is None:   # each cell's budget: the one most of its finished runs record (the larger on a tie)
         counts = Counter((r.task, r.variant, r.budget) for r in runs if r.budget is not None)
         runs, other = _split_budgets(runs, {(t, v): b for (t, v, b), _ in sorted(
             counts.items(), key=lambda kv: (kv[1], kv[0][2]))})
+    runs, mixed = split_settings(runs)      # nor settings: a sweep file edited between calls, runs moved in
     if not runs:
         raise ReportError(f"{sweep_dir}: no finished runs (expected <task>/<variant>/seed<k>/metrics.csv)"
                           f"{' of the grid ' + str(sweep) if sweep is not None else ''}"
@@ -404,6 +409,11 @@ def write_report(sweep_dir: str | Path, out: str | Path | None = None, bins: int
         if notes is not None:
             notes.append(f"left out {len(other)} run(s) trained at another budget than their cell's (results.md "
                          "names them); a cell never mixes budgets")
+    if mixed:
+        md += ["", f"Left out, trained with other settings than their cell's runs ({len(mixed)}): "
+               + ", ".join(sorted(f"{r.task}/{r.variant}/seed{r.seed}" for r in mixed)) + "."]
+        if notes is not None:
+            notes.append(f"left out {len(mixed)} run(s) trained with other settings than their cell's runs")
     paths: dict[str, Path] = {"table": write_text(out / "results.md", "\n".join(md))}
 
     rows: list[dict[str, Any]] = []

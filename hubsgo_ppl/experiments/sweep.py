@@ -26,7 +26,8 @@ from their checkpoint, and retries a crashed run once before reporting it as fai
 resumed or started afresh by ``train`` itself, with its guards: only the files ``train`` writes
 (``RUN_FILES``) are removed, a folder whose logs show a lost checkpoint is refused, and a refused run
 is reported in one line without a retry. A grid whose folders hold runs trained with other settings (a sweep file
-edited between calls) is refused before any run starts (:func:`check_recorded`). A sweep's ``name`` is a plain folder name, so that its
+edited between calls) is refused before any run starts (:func:`check_recorded`).
+A sweep's ``name`` is a plain folder name, so that its
 default folder ``runs/sweeps/NAME`` stays under ``runs/sweeps``.
 """
 
@@ -34,6 +35,7 @@ from __future__ import annotations
 
 import re
 import time
+from collections import Counter
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any, ClassVar, Literal
@@ -275,6 +277,25 @@ def _settings(cfg: dict[str, Any]) -> dict[str, Any]:
     out = {k: v for k, v in cfg.items() if k not in _FREE}
     out["hyper"] = {k: v for k, v in (out.get("hyper") or {}).items() if k != "steps"}
     return out
+
+
+def settings_key(run_dir: Path) -> str | None:
+    """What a run was trained with but for its seed and budget (:func:`_settings`), or None where unreadable."""
+    from .checkpoint import read_config_file
+
+    cfg = read_config_file(run_dir)
+    return repr(sorted(_settings(cfg).items())) if isinstance(cfg, dict) else None
+
+
+def split_settings(runs: list[Any]) -> tuple[list[Any], list[Any]]:
+    """(runs with their cell's settings, the others): a cell's settings are those most of its runs (``task``,
+    ``variant``, ``settings``) record, the first run's on a tie; a run recording none counts as its cell's."""
+    counts = Counter((r.task, r.variant, r.settings) for r in runs if r.settings is not None)
+    cell: dict[tuple[str, str], str] = {}
+    for (t, v, key), _ in counts.most_common():
+        cell.setdefault((t, v), key)
+    other = [r for r in runs if r.settings is not None and r.settings != cell[(r.task, r.variant)]]
+    return [r for r in runs if r not in other], other
 
 
 def check_recorded(jobs: list[Job], path: Path) -> None:

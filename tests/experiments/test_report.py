@@ -286,3 +286,22 @@ def test_cells_of_the_same_seeds_state_them_once(tmp_path):
             _metrics(tmp_path / "sweep" / "keydoor" / variant / f"seed{seed}", [500, 1000], [0.0, 1.0])
     md = write_report(tmp_path / "sweep")["table"].read_text()
     assert "across seeds. Seeds: 0, 1, 4 (3) in every cell." in md and "Seeds per cell" not in md
+
+
+def test_a_cell_whose_runs_were_trained_with_other_settings_reports_the_ones_most_runs_share(tmp_path):
+    from hubsgo_ppl.experiments import RunConfig, train
+
+    fast = ["high.learning_starts=8", "high.batch_size=8", "low.learning_starts=100000", "low.hidden=[16]",
+            "high.hidden=[16]"]
+    for seed, option_steps in ((0, 15), (1, 15), (2, 5)):
+        train(RunConfig(task="fourroom", agent="hdqn", seed=seed, steps=1,
+                        overrides=[*fast, f"loop.option_steps={option_steps}"]),
+              tmp_path / f"fourroom/hdqn/seed{seed}", progress=False)
+    notes: list[str] = []
+    paths = write_report(tmp_path, notes=notes)
+    md = paths["table"].read_text()
+    assert "Seeds: 0, 1 (2) in every cell." in md
+    assert "Left out, trained with other settings than their cell's runs (1): fourroom/hdqn/seed2." in md
+    assert any("other settings" in n for n in notes)
+    rows = [r for r in csv.DictReader(paths["csv"].open()) if r["level"] == "aggregate"]
+    assert [r["n"] for r in rows] == ["2"]
