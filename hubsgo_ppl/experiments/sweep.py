@@ -301,8 +301,8 @@ def split_settings(runs: list[Any]) -> tuple[list[Any], list[Any]]:
 def check_recorded(jobs: list[Job], path: Path) -> None:
     """Refuse in one line, before any run starts, a grid whose folders hold runs trained with other settings
     than the grid now gives them (a sweep file edited between calls): a finished run would be skipped and an
-    interrupted one resumed as recorded, so a cell would mix two settings. A moved budget is refused only for a
-    run already past it (an interrupted run resumes at the new budget, as ``train --resume --steps`` does)."""
+    interrupted one resumed as recorded, so a cell would mix two settings. A budget is one of them: the schedules
+    run over it, so a run moved to another budget part way would differ from its cell's other runs."""
     from .checkpoint import run_config
     from .run import resolve_run
 
@@ -323,8 +323,8 @@ def check_recorded(jobs: list[Job], path: Path) -> None:
         where = _differs(have, wanted[key])
         if where:
             clash.append(f"{job.run_id} ({where})")
-        elif run_status(job) == "finished" and budget != job.budget:
-            clash.append(f"{job.run_id} (trained at a budget of {budget:,}, and past this grid's {job.budget:,})")
+        elif budget != job.budget:     # its schedules run over its budget: a moved one is another setting
+            clash.append(f"{job.run_id} (a budget of {budget:,}, not this grid's {job.budget:,})")
     if clash:
         raise SpecError(f"{path}: {len(clash)} run(s) in {Path(jobs[0].out).parent.parent.parent} were trained with "
                         f"other settings than this grid gives them, so their cells would mix two settings: "

@@ -347,9 +347,9 @@ def test_a_grid_edited_between_calls_is_refused_rather_than_mix_two_settings_in_
     with pytest.raises(SpecError, match=r"fourroom/hdqn/seed0 \(hyper.loop.option_steps\).*another --out"):
         run_sweep(path, workers=1, out=out, progress=False)
     assert not (out / "fourroom/hdqn/seed1").exists() and _rows(out / "fourroom/hdqn/seed0") == first
-    # a budget the finished run has already passed cannot move: it would be skipped at its old one
+    # another budget: a finished run would be skipped at its old one, an interrupted one moved to it part way
     _write(tmp_path, seeds=[0, 1], tasks=[{"name": "fourroom", "steps": 2}])
-    with pytest.raises(SpecError, match="trained at a budget of 1, and past this grid's 2"):
+    with pytest.raises(SpecError, match=r"seed0 \(a budget of 1, not this grid's 2\)"):
         run_sweep(path, workers=1, out=out, progress=False)
     assert not (out / "fourroom/hdqn/seed1").exists()
     # the grid as it was, with a seed added (and other checkpoints): the new seed runs, the old is skipped
