@@ -288,8 +288,7 @@ def _new(run: ResolvedRun, out: Path, cfg: RunConfig | None, started: bool, resu
             short = max_steps_below_solution(run.task_ref, (run.hyper.get("env") or {}).get("max_steps"))
             if short:
                 print(f"hubsgo: warning: {cfg.task}: {short}", file=sys.stderr)
-    short = horizon_below_option(run) if not resumed else None
-    if short:
+    if not resumed and (short := horizon_below_option(run)):
         print(f"hubsgo: warning: {cfg.task if cfg else run.task}: {short}", file=sys.stderr)
     # a scene of one's own, or a shipped one changed by --set env.KEY (the shipped scenes as they are have none)
     changed = cfg is not None and any(o.split("=", 1)[0].strip().startswith("env.") for o in cfg.overrides)
