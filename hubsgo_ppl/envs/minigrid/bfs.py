@@ -239,7 +239,7 @@ def optimal_steps_range(source: Any) -> tuple[int, int]:
     ``options.start: room``, each cell of the start room): ``(fewest, most)``, equal where it is fixed."""
     spec, starts, _ = _resolve(source, None)
     if spec.options.start == "room" and getattr(source, "unwrapped", None) is None:
-        return room_steps_range(spec, starts)
+        return room_steps_range(spec, starts, _Maze(spec), transition, lambda s: _bfs(spec, s, _target(spec, None)))
     steps = [optimal_steps(source, start_dir=None if len(starts) == 1 else s.dir) for s in starts]
     return min(steps), max(steps)
 

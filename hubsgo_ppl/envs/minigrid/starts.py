@@ -8,16 +8,16 @@ search from the goal gives every state's distance at once."""
 from __future__ import annotations
 
 from collections import deque
+from typing import Any, Callable
 
 from .layout import MazeSpec, MazeState
 
 
-def steps_from_starts(spec: MazeSpec, starts: list[MazeState], max_states: int) -> list[int | None] | None:
-    """Fewest steps from each of ``starts`` to the goal (None for a start that cannot reach it), or None
-    where the search passes ``max_states`` states."""
-    from .bfs import _Maze, transition
-
-    m = _Maze(spec)
+def steps_from_starts(m: Any, transition: Callable[[Any, MazeState, str], MazeState], starts: list[MazeState],
+                      max_states: int) -> list[int | None] | None:
+    """Fewest steps from each of ``starts`` to the goal of maze ``m`` (the planner's view of it, moved by
+    ``transition``; None for a start that cannot reach it), or None where the search passes ``max_states``
+    states."""
     terminal = m.lava | {m.goal}
     leads_here: dict[MazeState, list[MazeState]] = {s: [] for s in starts}
     frontier = deque(leads_here)
@@ -44,15 +44,16 @@ def steps_from_starts(spec: MazeSpec, starts: list[MazeState], max_states: int) 
     return [dist.get(s) for s in starts]
 
 
-def room_steps_range(spec: MazeSpec, starts: list[MazeState], max_states: int = 300_000) -> tuple[int, int]:
+def room_steps_range(spec: MazeSpec, starts: list[MazeState], m: Any,
+                     transition: Callable[[Any, MazeState, str], MazeState],
+                     plan: Callable[[MazeState], list | None], max_states: int = 300_000) -> tuple[int, int]:
     """``(fewest, most)`` steps to the goal over every cell of the start room and each of ``starts``'
-    directions; one search per start where the whole search passes ``max_states`` states."""
-    from .bfs import _bfs, _target
-
+    directions (``m``, ``transition``: the planner's maze and moves); one ``plan`` per start where the whole
+    search passes ``max_states`` states."""
     starts = [s._replace(pos=cell) for cell in spec.layout.start_room() for s in starts]
-    steps = steps_from_starts(spec, starts, max_states)
+    steps = steps_from_starts(m, transition, starts, max_states)
     if steps is None:
-        steps = [None if p is None else len(p) for p in (_bfs(spec, s, _target(spec, None)) for s in starts)]
+        steps = [None if p is None else len(p) for p in map(plan, starts)]
     if None in steps:
         raise ValueError(f"{spec.source}: the goal is unreachable from {starts[steps.index(None)]}")
     return min(steps), max(steps)
